@@ -1,0 +1,32 @@
+"""ROS-free core: the paper's separable two-stage fundamental-matrix estimator and baselines.
+
+Public API::
+
+    estimate_fundamental(pts1, pts2, image_size1, image_size2=None, method="sep5",
+                         threshold=1.0, confidence=0.99, seed=None, **options) -> Estimate
+
+plus the helpers :func:`symmetric_epipolar_distance`, :func:`sampson_distance`,
+:func:`fundamental_from_cameras` and :func:`ransac_trials` (the paper's F(k, r)).
+No module below this package imports ROS.
+"""
+
+from sepfm_ros.geometry.epipolar import (
+    fundamental_from_cameras,
+    normalize_fundamental,
+    sampson_distance,
+    symmetric_epipolar_distance,
+)
+from sepfm_ros.geometry.estimate import Estimate
+from sepfm_ros.geometry.estimator import METHODS, estimate_fundamental
+from sepfm_ros.geometry.ransac import ransac_trials
+
+__all__ = [
+    "METHODS",
+    "Estimate",
+    "estimate_fundamental",
+    "fundamental_from_cameras",
+    "normalize_fundamental",
+    "ransac_trials",
+    "sampson_distance",
+    "symmetric_epipolar_distance",
+]

@@ -1,0 +1,50 @@
+"""The result type of every estimator in :mod:`sepfm_ros.geometry`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass
+class Estimate:
+    """A fundamental-matrix estimate and how it was obtained.
+
+    Attributes:
+        F: (3, 3) float64 with ``x2^T F x1 = 0`` (x1 in image 1, x2 in image 2, pixels),
+            unit Frobenius norm, rank 2; None when no model was found.
+        inliers: (N,) bool, matches within the threshold of F (all False when F is None).
+        hypotheses: total models scored (stage 1 + stage 2 + any fallback RANSAC). Each real
+            root of the seven-point cubic is one model.
+        stage1_hypotheses: line-homography models H_e scored on the line points only.
+        stage2_hypotheses: F models scored against all matches.
+        line_pair: ((a1, b1, c1), (a2, b2, c2)) the image lines used (``a u + b v + c = 0`` in
+            pixels of image 1 and image 2, ``a^2 + b^2 = 1``), or None.
+        line_inliers: (M,) int indices of the matches on the line pair that agree with H_e.
+        fallback: True when standard RANSAC ran because no usable line pair was found.
+        status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
+        method: the method name that produced this estimate.
+        timings_ms: milliseconds per stage ("lines", "stage1", "stage2", "refine", "total").
+    """
+
+    F: np.ndarray | None
+    inliers: np.ndarray
+    hypotheses: int = 0
+    stage1_hypotheses: int = 0
+    stage2_hypotheses: int = 0
+    line_pair: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
+    line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    fallback: bool = False
+    status: str = "ok"
+    method: str = ""
+    timings_ms: dict[str, float] = field(default_factory=dict)
+
+    @property
+    def num_inliers(self) -> int:
+        return int(np.count_nonzero(self.inliers))
+
+    @property
+    def ok(self) -> bool:
+        """True when F exists and the status is not a failure/degeneracy."""
+        return self.F is not None and self.status == "ok"

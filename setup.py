@@ -1,0 +1,70 @@
+"""ament_python package setup for sepfm_ros.
+
+Two ways to install, one setup.py:
+
+- ``pip install -e '.[ros,test]'`` in a plain Python environment: rclpy and the message packages
+  come from the PyPI wheels in the ``ros`` extra; the one console command is ``sepfm_ros``.
+- ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
+  ``make_bag``, ``replay``, ``record``, ``process`` and ``eval`` are installed to
+  ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
+
+The short executable names are only registered for colcon/setuptools builds, not for wheel builds
+(pip), so that a virtual environment's ``bin/`` never gets a ``node`` that shadows Node.js.
+"""
+
+import sys
+from glob import glob
+
+from setuptools import find_packages, setup
+
+PACKAGE = "sepfm_ros"
+# Subcommands of the `sepfm_ros` console command that are also `ros2 run` executables.
+EXECUTABLES = ["node", "make_bag", "replay", "record", "process", "eval"]
+_WHEEL_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
+_building_wheel = bool(_WHEEL_COMMANDS.intersection(sys.argv[1:]))
+
+console_scripts = [f"{PACKAGE} = {PACKAGE}.cli:main"]
+if not _building_wheel:
+    console_scripts += [f"{name} = {PACKAGE}.cli:{name}_main" for name in EXECUTABLES]
+
+setup(
+    name=PACKAGE,
+    version="0.1.0",
+    packages=find_packages(exclude=["test", "test.*", "benchmarks"]),
+    package_data={PACKAGE: ["data/*"]},
+    data_files=[
+        ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
+        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}/config", glob("config/*.yaml")),
+        (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+    ],
+    python_requires=">=3.10",
+    install_requires=[
+        "numpy>=1.24",
+        "opencv-python-headless>=4.8",
+        "rosbags>=0.10",
+    ],
+    extras_require={
+        # ROS 2 Jazzy from PyPI wheels, for machines without a ROS install (colcon users get these
+        # from apt instead, so they are not in install_requires).
+        "ros": [
+            "ros-jazzy-rclpy[fastrtps]",
+            "ros-jazzy-common-interfaces",
+        ],
+        "poselib": ["poselib"],
+        "test": [
+            "pytest>=7",
+            "hypothesis>=6",
+            "ruff>=0.5",
+            "colcon-core",
+            "colcon-ros",
+            "poselib",
+        ],
+    },
+    zip_safe=True,
+    maintainer="sepfm_ros developers",
+    maintainer_email="dev@sepfm-ros.invalid",
+    description="Separable four-point fundamental matrix estimation node for ROS 2",
+    license="Apache-2.0",
+    entry_points={"console_scripts": console_scripts},
+)

@@ -43,6 +43,7 @@ setup(
         "numpy>=1.24",
         "opencv-python-headless>=4.8",
         "rosbags>=0.10",
+        "rosbags-image>=0.10",
     ],
     extras_require={
         # ROS 2 Jazzy from PyPI wheels, for machines without a ROS install (colcon users get these

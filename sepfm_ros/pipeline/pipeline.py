@@ -1,0 +1,259 @@
+"""Images -> matches -> fundamental-matrix estimate, with per-stage timings. No ROS.
+
+One :class:`Pipeline` serves the live node and offline bag processing, so the same images with
+the same :class:`PipelineConfig` (including ``seed``) give the same result in both::
+
+    pipeline = Pipeline(PipelineConfig(features="orb", max_features=1000, seed=0))
+    result = pipeline.process(image_a, image_b)       # numpy images (H, W) or (H, W, 3)
+    result.estimate.F, result.matches, result.errors, result.timings_ms
+
+Callers that decode the images themselves (e.g. from ROS messages) pass the time it took as
+``prior_timings_ms={"decode": ms}``; it is reported first and counted in the total. Detected
+features can be cached by a caller-chosen key (e.g. a frame's stamp), so in motion mode each
+frame is detected once.
+
+Timing stages (milliseconds): ``decode`` (when given), ``features``, ``match``, ``estimate`` (the
+whole estimator call), the estimator's own stages when it reports them (``lines`` = line-pair
+search, ``stage1``, ``stage2``, ``refine``) and ``total``.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import OrderedDict
+from collections.abc import Hashable
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+import numpy as np
+
+from sepfm_ros.geometry import METHODS, Estimate, estimate_fundamental, symmetric_epipolar_distance
+from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
+
+# The fewest matches any estimator method accepts (eight-point needs 8).
+MIN_MATCHES = 8
+
+ESTIMATOR_STAGES = ("lines", "stage1", "stage2", "refine")
+
+
+@dataclass(frozen=True)
+class PipelineConfig:
+    """Everything that decides a pipeline result.
+
+    Attributes:
+        features: detector/descriptor, one of ``FEATURES`` ("orb", "sift", "akaze").
+        max_features: keypoints per image (ORB/SIFT), >= 8.
+        ratio: Lowe ratio-test bound in (0, 1].
+        method: estimator method, one of ``sepfm_ros.geometry.METHODS``.
+        threshold_px: inlier threshold, symmetric epipolar distance in pixels, > 0.
+        confidence: RANSAC confidence in (0, 1).
+        seed: seed of every random choice of the estimator; the same for every pair, so a pair
+            of images gives the same F live and offline.
+        max_matches: keep at most this many best matches for the estimator (0 = all).
+        estimator_options: extra keyword options passed to ``estimate_fundamental`` as-is.
+    """
+
+    features: str = "orb"
+    max_features: int = 1000
+    ratio: float = 0.8
+    method: str = "sep5"
+    threshold_px: float = 1.0
+    confidence: float = 0.99
+    seed: int = 0
+    max_matches: int = 0
+    estimator_options: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        errors = config_errors(self)
+        if errors:
+            raise ValueError("invalid pipeline config: " + "; ".join(errors))
+
+
+def config_errors(config: PipelineConfig) -> list[str]:
+    """Human-readable reasons why ``config`` is invalid (empty when valid)."""
+    errors = []
+    if config.features not in FEATURES:
+        errors.append(f"features must be one of {FEATURES}, got {config.features!r}")
+    if config.method not in METHODS:
+        errors.append(f"method must be one of {METHODS}, got {config.method!r}")
+    if not int(config.max_features) >= MIN_MATCHES:
+        errors.append(f"max_features must be >= {MIN_MATCHES}, got {config.max_features}")
+    if not 0.0 < float(config.ratio) <= 1.0:
+        errors.append(f"ratio must be in (0, 1], got {config.ratio}")
+    if not float(config.threshold_px) > 0.0:
+        errors.append(f"threshold_px must be > 0, got {config.threshold_px}")
+    if not 0.0 < float(config.confidence) < 1.0:
+        errors.append(f"confidence must be in (0, 1), got {config.confidence}")
+    if int(config.seed) < 0:
+        errors.append(f"seed must be >= 0, got {config.seed}")
+    if int(config.max_matches) < 0:
+        errors.append(f"max_matches must be >= 0, got {config.max_matches}")
+    return errors
+
+
+@dataclass
+class PipelineResult:
+    """What the pipeline made of one image pair.
+
+    Attributes:
+        matches: putative matches, best first (pts_a in image a, pts_b in image b).
+        estimate: the estimator's result; ``estimate.F`` maps a to b (``x_b^T F x_a = 0``), or
+            None with ``estimate.status`` saying why.
+        errors: (N,) float64 symmetric epipolar distance (px) of every match under F; NaN when
+            F is None.
+        on_line: (N,) bool, matches on the estimator's line pair that agree with H_e.
+        size_a, size_b: (width, height) of the two images.
+        timings_ms: stage -> milliseconds (see the module docstring).
+    """
+
+    matches: Matches
+    estimate: Estimate
+    errors: np.ndarray
+    on_line: np.ndarray
+    size_a: tuple[int, int]
+    size_b: tuple[int, int]
+    timings_ms: dict[str, float]
+
+    @property
+    def ok(self) -> bool:
+        """True when a usable F was estimated."""
+        return self.estimate.ok
+
+
+def _ms(t0: float) -> float:
+    return (time.perf_counter() - t0) * 1e3
+
+
+class Pipeline:
+    """Two images in, matches and F out. Not thread-safe: one pipeline per worker thread."""
+
+    def __init__(self, config: PipelineConfig | None = None, cache_size: int = 4) -> None:
+        self._cache: OrderedDict[Hashable, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+        self._cache_size = int(cache_size)
+        self._config = PipelineConfig()
+        self._detector = None
+        self.configure(config or PipelineConfig())
+
+    @property
+    def config(self) -> PipelineConfig:
+        return self._config
+
+    def configure(self, config: PipelineConfig) -> None:
+        """Switch to ``config``; drops cached features when the detector changes."""
+        old = self._config
+        if self._detector is None or (config.features, config.max_features) != (
+            old.features,
+            old.max_features,
+        ):
+            self._detector = make_detector(config.features, config.max_features)
+            self._cache.clear()
+        self._config = config
+
+    def update(self, **changes: Any) -> PipelineConfig:
+        """Configure with some fields changed (validated); returns the new config."""
+        config = replace(self._config, **changes)
+        self.configure(config)
+        return config
+
+    def _features(
+        self, image: np.ndarray, key: Hashable | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        if key is not None and key in self._cache:
+            self._cache.move_to_end(key)
+            return self._cache[key]
+        feats = detect(image, self._detector)
+        if key is not None and self._cache_size > 0:
+            self._cache[key] = feats
+            while len(self._cache) > self._cache_size:
+                self._cache.popitem(last=False)
+        return feats
+
+    def process(
+        self,
+        image_a: np.ndarray,
+        image_b: np.ndarray,
+        key_a: Hashable | None = None,
+        key_b: Hashable | None = None,
+        prior_timings_ms: dict[str, float] | None = None,
+    ) -> PipelineResult:
+        """Match ``image_a`` to ``image_b`` and estimate F (``x_b^T F x_a = 0``).
+
+        Args:
+            image_a, image_b: (H, W) or (H, W, 3|4) numpy images (8-bit, or stretched to 8 bits).
+            key_a, key_b: optional hashable keys under which detected features are cached
+                (same key = same image); None disables caching for that image.
+            prior_timings_ms: stages the caller ran before (e.g. {"decode": 3.2}), reported
+                first in ``timings_ms`` and added to its "total".
+        Returns:
+            A :class:`PipelineResult`. Estimation failures (too few matches, degenerate data)
+            are reported in ``result.estimate.status`` with ``F`` None, never raised.
+        """
+        cfg = self._config
+        timings: dict[str, float] = dict(prior_timings_ms or {})
+        t_start = time.perf_counter()
+        size_a = (int(image_a.shape[1]), int(image_a.shape[0]))
+        size_b = (int(image_b.shape[1]), int(image_b.shape[0]))
+
+        t0 = time.perf_counter()
+        pts_a, desc_a = self._features(image_a, key_a)
+        pts_b, desc_b = self._features(image_b, key_b)
+        timings["features"] = _ms(t0)
+
+        t0 = time.perf_counter()
+        matches = match_descriptors(pts_a, desc_a, pts_b, desc_b, cfg.features, cfg.ratio)
+        if cfg.max_matches and len(matches) > cfg.max_matches:
+            k = cfg.max_matches
+            matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])
+        timings["match"] = _ms(t0)
+
+        t0 = time.perf_counter()
+        estimate = self._estimate(matches, size_a, size_b)
+        timings["estimate"] = _ms(t0)
+        for stage in ESTIMATOR_STAGES:
+            if stage in estimate.timings_ms:
+                timings[stage] = float(estimate.timings_ms[stage])
+
+        n = len(matches)
+        if estimate.F is not None and n:
+            errors = symmetric_epipolar_distance(estimate.F, matches.pts_a, matches.pts_b)
+            errors = np.asarray(errors, dtype=np.float64).reshape(n)
+        else:
+            errors = np.full(n, np.nan)
+        on_line = np.zeros(n, dtype=bool)
+        if len(estimate.line_inliers):
+            idx = np.asarray(estimate.line_inliers, dtype=np.int64)
+            on_line[idx[(idx >= 0) & (idx < n)]] = True
+        timings["total"] = _ms(t_start) + sum((prior_timings_ms or {}).values())
+        return PipelineResult(matches, estimate, errors, on_line, size_a, size_b, timings)
+
+    def _estimate(
+        self, matches: Matches, size_a: tuple[int, int], size_b: tuple[int, int]
+    ) -> Estimate:
+        cfg = self._config
+        n = len(matches)
+        if n < MIN_MATCHES:
+            return Estimate(
+                F=None,
+                inliers=np.zeros(n, dtype=bool),
+                status=f"too few matches: {n} < {MIN_MATCHES}",
+                method=cfg.method,
+            )
+        try:
+            return estimate_fundamental(
+                matches.pts_a,
+                matches.pts_b,
+                size_a,
+                size_b,
+                method=cfg.method,
+                threshold=cfg.threshold_px,
+                confidence=cfg.confidence,
+                seed=cfg.seed,
+                **cfg.estimator_options,
+            )
+        except ValueError as err:  # the estimator's "bad input" contract
+            return Estimate(
+                F=None,
+                inliers=np.zeros(n, dtype=bool),
+                status=f"estimator rejected input: {err}",
+                method=cfg.method,
+            )

@@ -1,0 +1,564 @@
+"""The live two-view geometry node ``sepfm``: images in, F, matches and diagnostics out.
+
+Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-args ...``).
+
+Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
+fields, pair stereo stamps (:mod:`sepfm_ros.ros.sync`) and put the newest pair into a one-element
+slot. One dedicated worker thread takes the pair from the slot, decodes the images, runs the
+:class:`~sepfm_ros.pipeline.pipeline.Pipeline` and publishes. A pair still waiting in the slot when
+a newer one arrives is replaced and counted as dropped, so nothing queues without bound and the
+executor keeps receiving while the worker computes (OpenCV releases the GIL). A dedicated thread
+is used rather than a MultiThreadedExecutor because the latest-only slot is needed anyway and
+running several estimations at once on 2 cores would only raise everyone's latency.
+"""
+
+from __future__ import annotations
+
+import argparse
+import threading
+import time
+import traceback
+from collections import Counter, deque
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import rclpy
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+    SetParametersResult,
+)
+from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry import METHODS
+from sepfm_ros.pipeline.drawing import draw_result
+from sepfm_ros.pipeline.features import FEATURES
+from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+from sepfm_ros.ros.image_conversion import (
+    ImageDecodeError,
+    check_image,
+    message_to_numpy,
+    numpy_to_image,
+)
+from sepfm_ros.ros.messages import (
+    copy_header,
+    diagnostic_array,
+    estimate_info,
+    fundamental_to_image,
+    health_status,
+    result_to_pointcloud2,
+    stamp_ns,
+)
+from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+
+NODE_NAME = "sepfm"
+MODES = ("stereo", "motion")
+TRANSPORTS = ("raw", "compressed")
+# Estimator option that the hough_width_px parameter sets (0 = leave the estimator's default).
+HOUGH_WIDTH_OPTION = "hough_width"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter: default, description, and either a numeric range or choices."""
+
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+    read_only: bool = False
+
+
+PARAMS: dict[str, ParamSpec] = {
+    "mode": ParamSpec(
+        "stereo",
+        "stereo: pair left/image_raw with right/image_raw by stamp; motion: frame t-gap with t",
+        choices=MODES,
+        read_only=True,
+    ),
+    "transport": ParamSpec(
+        "raw",
+        "raw: sensor_msgs/Image; compressed: sensor_msgs/CompressedImage on <topic>/compressed",
+        choices=TRANSPORTS,
+        read_only=True,
+    ),
+    "sync_slop_s": ParamSpec(
+        0.005, "stereo: largest stamp difference of a pair, s (0 = exact)", 0.0, 1.0
+    ),
+    "sync_queue_size": ParamSpec(10, "stereo: unpaired messages kept per side", 1, 1000),
+    "frame_gap": ParamSpec(1, "motion: F between frame t - frame_gap and frame t", 1, 100),
+    "features": ParamSpec("orb", "feature detector/descriptor", choices=FEATURES),
+    "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
+    "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
+    "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
+    "method": ParamSpec("sep5", "estimator method", choices=METHODS),
+    "threshold_px": ParamSpec(
+        1.0, "inlier threshold, symmetric epipolar distance, px", 0.01, 100.0
+    ),
+    "confidence": ParamSpec(0.99, "RANSAC confidence", 0.5, 0.999999),
+    "hough_width_px": ParamSpec(
+        0, "working width of the line-pair (Hough) search, px (0 = estimator default)", 0, 8192
+    ),
+    "seed": ParamSpec(
+        0, "seed of the estimator's random choices (same for every pair)", 0, 2**31 - 1
+    ),
+    "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
+    "diagnostics_period_s": ParamSpec(
+        1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
+    ),
+}
+
+PIPELINE_PARAMS = {
+    "features": "features",
+    "max_features": "max_features",
+    "ratio": "ratio",
+    "max_matches": "max_matches",
+    "method": "method",
+    "threshold_px": "threshold_px",
+    "confidence": "confidence",
+    "seed": "seed",
+}
+
+
+def _descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
+    extra = f" (one of: {', '.join(spec.choices)})" if spec.choices else ""
+    desc = ParameterDescriptor(
+        name=name, description=spec.description + extra, read_only=spec.read_only
+    )
+    if isinstance(spec.default, bool) or isinstance(spec.default, str):
+        desc.type = ParameterType.PARAMETER_STRING
+    elif isinstance(spec.default, int):
+        desc.type = ParameterType.PARAMETER_INTEGER
+        desc.integer_range = [
+            IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)
+        ]
+    else:
+        desc.type = ParameterType.PARAMETER_DOUBLE
+        desc.floating_point_range = [
+            FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+        ]
+    if spec.choices:
+        desc.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return desc
+
+
+def parameter_error(name: str, value: Any) -> str | None:
+    """Why ``value`` is not acceptable for parameter ``name`` (None when it is)."""
+    spec = PARAMS.get(name)
+    if spec is None:
+        return None  # not ours (e.g. use_sim_time, qos overrides)
+    if spec.choices:
+        if value not in spec.choices:
+            return f"{name} must be one of {', '.join(spec.choices)}; got {value!r}"
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return f"{name} must be a number; got {value!r}"
+    if not spec.low <= value <= spec.high:
+        return f"{name} must be in [{spec.low}, {spec.high}]; got {value}"
+    return None
+
+
+def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+    """Node parameter values -> PipelineConfig (ValueError when invalid)."""
+    options = {}
+    if int(values.get("hough_width_px", 0)) > 0:
+        options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
+    kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}
+    return PipelineConfig(**kwargs, estimator_options=options)
+
+
+@dataclass
+class Job:
+    """A pair waiting for the worker: a = left/earlier, b = right/current."""
+
+    msg_a: Any
+    msg_b: Any
+    received: float  # time.monotonic() at receipt of the newer message
+    header: Header  # header of the newer image (copied to every output)
+    key_a: Any
+    key_b: Any
+
+
+def _percentile(values: list[float], q: float) -> float:
+    return float(np.percentile(values, q)) if values else float("nan")
+
+
+class SepfmNode(Node):
+    """The ``sepfm`` node (see the module docstring for the threading model)."""
+
+    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+        super().__init__(node_name, **kwargs)
+        for name, spec in PARAMS.items():
+            self.declare_parameter(name, spec.default, _descriptor(name, spec))
+        values = self._param_values()
+        errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
+        if errors:
+            raise ValueError("invalid parameters: " + "; ".join(errors))
+        self._mode = values["mode"]
+        self._transport = values["transport"]
+
+        self._lock = threading.Lock()
+        self._cond = threading.Condition(self._lock)
+        self._slot: Job | None = None
+        self._stop = False
+        self._pending_config: PipelineConfig | None = None
+        self._pipeline = Pipeline(pipeline_config(values), cache_size=8)
+        self._epipolar_lines = int(values["debug_epipolar_lines"])
+        self._sync: ApproximateTimeSync[tuple[Any, float]] = ApproximateTimeSync(
+            int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"])
+        )
+        self._frame_gap = int(values["frame_gap"])
+        self._history: deque[tuple[Any, float, int]] = deque(maxlen=self._frame_gap + 1)
+
+        # counters (under self._lock)
+        self._received: Counter[str] = Counter()
+        self._published = 0
+        self._failed = 0
+        self._dropped = 0
+        self._pairs = 0
+        self._errors: Counter[str] = Counter()
+        self._logged_kinds: set[str] = set()
+        self._latency_ms: deque[float] = deque(maxlen=500)
+        self._wait_ms: deque[float] = deque(maxlen=500)
+        self._max_wait_ms = 0.0
+        self._last_report = (time.monotonic(), Counter(), 0)
+
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self._pub_f = self.create_publisher(Image, "~/fundamental", reliable)
+        self._pub_matches = self.create_publisher(PointCloud2, "~/matches", reliable)
+        self._pub_info = self.create_publisher(DiagnosticArray, "~/estimate_info", reliable)
+        self._pub_debug = self.create_publisher(Image, "~/debug_image", reliable)
+        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
+
+        msg_type = CompressedImage if self._transport == "compressed" else Image
+        suffix = "/compressed" if self._transport == "compressed" else ""
+        overrides = QoSOverridingOptions.with_default_policies()
+        if self._mode == "stereo":
+            topics = {"left": "left/image_raw", "right": "right/image_raw"}
+            self._subs = [
+                self.create_subscription(
+                    msg_type,
+                    topics["left"] + suffix,
+                    lambda m: self._on_stereo(m, LEFT),
+                    qos_profile_sensor_data,
+                    qos_overriding_options=overrides,
+                ),
+                self.create_subscription(
+                    msg_type,
+                    topics["right"] + suffix,
+                    lambda m: self._on_stereo(m, RIGHT),
+                    qos_profile_sensor_data,
+                    qos_overriding_options=overrides,
+                ),
+            ]
+        else:
+            self._subs = [
+                self.create_subscription(
+                    msg_type,
+                    "image_raw" + suffix,
+                    self._on_motion,
+                    qos_profile_sensor_data,
+                    qos_overriding_options=overrides,
+                )
+            ]
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
+        self._worker = threading.Thread(target=self._work, name="sepfm-worker", daemon=True)
+        self._worker.start()
+        self.get_logger().info(
+            f"{self._mode} mode, {self._transport} transport, listening on "
+            f"{', '.join(s.topic_name for s in self._subs)}; {self._pipeline.config}"
+        )
+
+    # ---------------------------------------------------------------- parameters
+    def _param_values(self) -> dict[str, Any]:
+        return {name: self.get_parameter(name).value for name in PARAMS}
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        values = self._param_values()
+        reasons = []
+        for p in params:
+            if p.name in PARAMS and PARAMS[p.name].read_only:
+                reasons.append(f"{p.name} is read-only (set it at start-up)")
+                continue
+            error = parameter_error(p.name, p.value)
+            if error:
+                reasons.append(error)
+            elif p.name in PARAMS:
+                values[p.name] = p.value
+        if not reasons:
+            try:
+                pipeline_config(values)
+            except ValueError as err:
+                reasons.append(str(err))
+        if reasons:
+            reason = "; ".join(reasons)
+            self.get_logger().warning(f"parameter change rejected: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        values = self._param_values()
+        config = pipeline_config(values)
+        with self._lock:
+            self._pending_config = config
+            self._epipolar_lines = int(values["debug_epipolar_lines"])
+            self._sync.configure(
+                int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"])
+            )
+            if int(values["frame_gap"]) != self._frame_gap:
+                self._frame_gap = int(values["frame_gap"])
+                self._history = deque(self._history, maxlen=self._frame_gap + 1)
+        self.get_logger().info(
+            "parameters set: " + ", ".join(f"{p.name}={p.value!r}" for p in params)
+        )
+
+    # ---------------------------------------------------------------- input callbacks
+    def _bad_input(self, kind: str, text: str) -> None:
+        """Count a bad message by kind and log it the first time its kind occurs."""
+        with self._lock:
+            self._errors[kind] += 1
+            first = kind not in self._logged_kinds
+            self._logged_kinds.add(kind)
+        if first:
+            self.get_logger().error(
+                f"skipping bad input ({kind}): {text}"
+                " [logged once per kind, counted in /diagnostics]"
+            )
+
+    def _precheck(self, msg: Any, topic: str) -> bool:
+        """Cheap field validation in the callback (no pixel access); False when skipped."""
+        try:
+            if self._transport == "raw":
+                check_image(msg)
+            elif len(msg.data) == 0:
+                raise ImageDecodeError("zero_size", "compressed image has no data")
+        except ImageDecodeError as err:
+            self._bad_input(err.kind, f"{topic}: {err}")
+            return False
+        return True
+
+    def _offer(self, job: Job) -> None:
+        with self._cond:
+            if self._slot is not None:
+                self._dropped += 1
+            self._slot = job
+            self._pairs += 1
+            self._cond.notify()
+
+    def _on_stereo(self, msg: Any, side: int) -> None:
+        received = time.monotonic()
+        topic = "left" if side == LEFT else "right"
+        with self._lock:
+            self._received[topic] += 1
+        if not self._precheck(msg, topic):
+            return
+        with self._lock:
+            pair = self._sync.add(side, stamp_ns(msg.header.stamp), (msg, received))
+        if pair is None:
+            return
+        (left, t_left), (right, t_right) = pair
+        if self._transport == "raw" and (left.width, left.height) != (right.width, right.height):
+            self._bad_input(
+                "size_mismatch",
+                f"left {left.width}x{left.height} and right {right.width}x{right.height} differ",
+            )
+            return
+        ns_l, ns_r = stamp_ns(left.header.stamp), stamp_ns(right.header.stamp)
+        received = max(t_left, t_right)
+        header = copy_header(left.header)
+        self._offer(Job(left, right, received, header, ("l", ns_l), ("r", ns_r)))
+
+    def _on_motion(self, msg: Any) -> None:
+        received = time.monotonic()
+        with self._lock:
+            self._received["image"] += 1
+        if not self._precheck(msg, "image"):
+            return
+        stamp = stamp_ns(msg.header.stamp)
+        with self._lock:
+            if self._history and stamp <= self._history[-1][2]:
+                late = True
+            else:
+                late = False
+                self._history.append((msg, received, stamp))
+                ready = len(self._history) == self._history.maxlen
+                first = self._history[0]
+        if late:
+            self._bad_input("stamp_not_increasing", f"frame stamp {stamp} ns is not after the last")
+            return
+        if not ready:
+            return
+        self._offer(Job(first[0], msg, received, copy_header(msg.header), first[2], stamp))
+
+    # ---------------------------------------------------------------- worker
+    def _work(self) -> None:
+        while True:
+            with self._cond:
+                while self._slot is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                job, self._slot = self._slot, None
+                config, self._pending_config = self._pending_config, None
+            if config is not None:
+                self._pipeline.configure(config)
+            try:
+                self._process(job)
+            except ImageDecodeError as err:
+                self._bad_input(err.kind, str(err))
+            except Exception as err:  # keep serving; count and log once per kind
+                kind = f"internal_{type(err).__name__}"
+                self._bad_input(kind, "".join(traceback.format_exception(err)))
+
+    def _process(self, job: Job) -> None:
+        started = time.monotonic()
+        wait_ms = (started - job.received) * 1e3
+        t0 = time.perf_counter()
+        image_a = message_to_numpy(job.msg_a, "mono8")
+        image_b = message_to_numpy(job.msg_b, "mono8")
+        decode_ms = (time.perf_counter() - t0) * 1e3
+        if image_a.shape != image_b.shape:
+            raise ImageDecodeError(
+                "size_mismatch",
+                f"images of a pair differ in size: {image_a.shape[::-1]} vs {image_b.shape[::-1]}",
+            )
+        result = self._pipeline.process(
+            image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
+        )
+        t0 = time.perf_counter()
+        header = job.header
+        if result.ok:
+            self._pub_f.publish(fundamental_to_image(result.estimate.F, header))
+        self._pub_matches.publish(result_to_pointcloud2(result, header))
+        publish_ms = (time.perf_counter() - t0) * 1e3
+        latency_ms = (time.monotonic() - job.received) * 1e3
+        self._pub_info.publish(
+            estimate_info(
+                result,
+                header,
+                job.msg_a.header.stamp,
+                job.msg_b.header.stamp,
+                self._pipeline.config.features,
+                extra_timings_ms={"publish": publish_ms, "wait": wait_ms, "latency": latency_ms},
+                node_name=self.get_fully_qualified_name(),
+            )
+        )
+        if self._pub_debug.get_subscription_count() > 0:
+            with self._lock:
+                n_lines = self._epipolar_lines
+            canvas = draw_result(image_a, image_b, result, n_lines)
+            self._pub_debug.publish(numpy_to_image(canvas, "bgr8", header))
+        with self._lock:
+            self._latency_ms.append(latency_ms)
+            self._wait_ms.append(wait_ms)
+            self._max_wait_ms = max(self._max_wait_ms, wait_ms)
+            if result.ok:
+                self._published += 1
+            else:
+                self._failed += 1
+
+    # ---------------------------------------------------------------- health
+    def health(self) -> dict[str, Any]:
+        """The values of the /diagnostics report (rates over the last period)."""
+        now = time.monotonic()
+        with self._lock:
+            t_last, received_last, published_last = self._last_report
+            dt = max(now - t_last, 1e-6)
+            values: dict[str, Any] = {}
+            for topic in ("left", "right") if self._mode == "stereo" else ("image",):
+                rate = (self._received[topic] - received_last[topic]) / dt
+                values[f"input_rate_{topic}_hz"] = rate
+                values[f"received_{topic}"] = self._received[topic]
+            values["output_rate_hz"] = (self._published - published_last) / dt
+            values["published"] = self._published
+            values["estimation_failed"] = self._failed
+            values["synchronized_pairs"] = self._pairs
+            values["dropped_pairs"] = self._dropped
+            if self._mode == "stereo":
+                values["sync_unmatched"] = self._sync.stats.unmatched + self._sync.stats.evicted
+                values["sync_late"] = self._sync.stats.late
+            lat = list(self._latency_ms)
+            values["latency_p50_ms"] = _percentile(lat, 50)
+            values["latency_p95_ms"] = _percentile(lat, 95)
+            values["wait_max_ms"] = self._max_wait_ms
+            values["errors_total"] = sum(self._errors.values())
+            for kind, count in sorted(self._errors.items()):
+                values[f"errors_{kind}"] = count
+            self._last_report = (now, Counter(self._received), self._published)
+        return values
+
+    def _report_health(self) -> None:
+        values = self.health()
+        level = DiagnosticStatus.WARN if values["errors_total"] else DiagnosticStatus.OK
+        message = f"{values['errors_total']} bad inputs skipped" if values["errors_total"] else "ok"
+        status = health_status(
+            f"{self.get_name()}: node", level, message, values, self.get_fully_qualified_name()
+        )
+        header = Header(stamp=self.get_clock().now().to_msg(), frame_id="")
+        self._pub_diag.publish(diagnostic_array(header, [status]))
+
+    def shutdown(self) -> None:
+        """Stop the worker thread (waits for the pair in progress)."""
+        with self._cond:
+            self._stop = True
+            self._cond.notify_all()
+        self._worker.join(timeout=10.0)
+
+
+def _usage() -> str:
+    lines = [
+        "usage: sepfm_ros node [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r A:=B]",
+        "",
+        "The sepfm node: subscribes to left/image_raw + right/image_raw (mode:=stereo) or",
+        "image_raw (mode:=motion), publishes ~/fundamental (64FC1 3x3 Image), ~/matches",
+        "(PointCloud2), ~/estimate_info and /diagnostics (DiagnosticArray), ~/debug_image.",
+        "",
+        "parameters:",
+    ]
+    for name, spec in PARAMS.items():
+        rng = f" one of {'/'.join(spec.choices)}" if spec.choices else f" [{spec.low}, {spec.high}]"
+        ro = " (read-only)" if spec.read_only else ""
+        lines.append(f"  {name} = {spec.default!r}{rng}{ro}: {spec.description}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str]) -> int:
+    """Run the node until SIGINT/SIGTERM; returns the process exit code."""
+    from rclpy.utilities import remove_ros_args
+
+    own = remove_ros_args(["sepfm", *argv])[1:]
+    parser = argparse.ArgumentParser(prog="sepfm_ros node", usage=_usage(), add_help=True)
+    parser.parse_args(own)
+    rclpy.init(args=["sepfm", *argv])
+    node = None
+    try:
+        try:
+            node = SepfmNode()
+        except ValueError as err:
+            print(f"sepfm_ros node: {err}", flush=True)
+            return 2
+        executor = SingleThreadedExecutor()
+        executor.add_node(node)
+        try:
+            executor.spin()
+        except (KeyboardInterrupt, ExternalShutdownException):
+            pass
+    finally:
+        if node is not None:
+            node.shutdown()
+            node.destroy_node()
+        rclpy.try_shutdown()
+    return 0

@@ -1,0 +1,188 @@
+"""``sepfm_ros eval`` / ``ros2 run sepfm_ros eval``: compare estimators on pairs with ground truth.
+
+Example (the README's command, from the repository root)::
+
+    sepfm_ros eval --manifest ../shared/data/pairs.json --out docs/eval --cache .eval_cache
+
+writes ``docs/eval/report.md`` with tables, PNG figures and per-run CSVs. Pairs that cannot be
+evaluated (missing image, malformed F, fewer than 8 matches, ...) are listed in the report with
+the reason; they do not stop the run. Exit code 0 when at least one pair was evaluated, 1 when
+none was, 2 on bad arguments or an unreadable manifest.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+import time
+from pathlib import Path
+
+from sepfm_ros.evaluation.manifest import ManifestError, PairSpec, load_manifest
+from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
+from sepfm_ros.evaluation.methods import REGISTRY, available_methods, resolve_methods
+from sepfm_ros.evaluation.report import update_readme, write_report
+from sepfm_ros.evaluation.run import EvalConfig, evaluate
+from sepfm_ros.pipeline.features import FEATURES
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    try:
+        vals = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        msg = f"expected comma-separated integers, got {text!r}"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not vals:
+        raise argparse.ArgumentTypeError("expected at least one seed")
+    return vals
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="sepfm_ros eval",
+        description="Evaluate fundamental-matrix estimators on image pairs with ground-truth F "
+        "and write a markdown report with PNG figures.",
+    )
+    p.add_argument(
+        "--manifest",
+        required=True,
+        type=Path,
+        help="JSON list of pairs in the format of ../shared/data/pairs.json",
+    )
+    p.add_argument(
+        "--root",
+        type=Path,
+        default=None,
+        help="folder the manifest's image paths are relative to (default: its folder)",
+    )
+    p.add_argument(
+        "--out", type=Path, default=Path("eval_report"), help="report folder (default: eval_report)"
+    )
+    p.add_argument(
+        "--cache",
+        type=Path,
+        default=Path(".eval_cache"),
+        help="folder for cached matches, keyed by image content + settings "
+        "(default: .eval_cache); 'none' disables caching",
+    )
+    p.add_argument("--features", choices=FEATURES, default="sift", help="default: sift")
+    p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default: 0.8)")
+    p.add_argument(
+        "--max-features",
+        type=int,
+        default=0,
+        help="detector feature cap, 0 = detector default (SIFT unlimited, ORB 2000)",
+    )
+    p.add_argument(
+        "--methods",
+        default="all",
+        help="comma list of methods, or all / ours / opencv (default: all available: "
+        f"{', '.join(available_methods())}); known: {', '.join(REGISTRY)}",
+    )
+    p.add_argument(
+        "--seeds",
+        type=_int_list,
+        default=(0, 1, 2),
+        help="comma-separated seeds each method runs with (default: 0,1,2)",
+    )
+    p.add_argument(
+        "--threshold",
+        type=float,
+        default=1.0,
+        help="inlier threshold in px (symmetric epipolar distance), same for all "
+        "methods (default: 1.0; the paper used 3)",
+    )
+    p.add_argument("--confidence", type=float, default=0.99, help="RANSAC confidence (0.99)")
+    p.add_argument(
+        "--baseline", default="ransac8", help="method of the paired comparisons (default: ransac8)"
+    )
+    p.add_argument("--scenes", default="", help="comma list of scenes to keep (default: all)")
+    p.add_argument(
+        "--max-pairs",
+        type=int,
+        default=0,
+        help="evaluate at most this many pairs, evenly spaced over the manifest (default: 0 = all)",
+    )
+    p.add_argument(
+        "--readme",
+        type=Path,
+        default=None,
+        help="also write the overall table between the eval-table markers of this file",
+    )
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def select_pairs(pairs: list[PairSpec], scenes: str, max_pairs: int) -> list[PairSpec]:
+    """Keep the named scenes, then at most ``max_pairs`` evenly spaced pairs (deterministic)."""
+    keep = {s.strip() for s in scenes.split(",") if s.strip()}
+    if keep:
+        pairs = [p for p in pairs if p.scene in keep]
+    if max_pairs and len(pairs) > max_pairs:
+        step = len(pairs) / max_pairs
+        pairs = [pairs[int(i * step)] for i in range(max_pairs)]
+    return pairs
+
+
+def main(argv: list[str]) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        settings = MatchSettings(args.features, args.ratio, args.max_features)
+        methods = resolve_methods(args.methods)
+    except ValueError as exc:
+        parser.error(str(exc))
+    if not 0.0 < args.confidence < 1.0:
+        parser.error(f"--confidence must be in (0, 1), got {args.confidence}")
+    if args.threshold <= 0:
+        parser.error(f"--threshold must be positive, got {args.threshold}")
+    if args.baseline not in REGISTRY:
+        parser.error(f"unknown --baseline {args.baseline!r}; known: {', '.join(REGISTRY)}")
+    try:
+        pairs, errors = load_manifest(args.manifest, args.root)
+    except ManifestError as exc:
+        print(f"sepfm_ros eval: {exc}", file=sys.stderr)
+        return 2
+    pairs = select_pairs(pairs, args.scenes, args.max_pairs)
+    cache_dir = None if str(args.cache).lower() == "none" else args.cache
+    cache = MatchesCache(cache_dir, settings)
+    config = EvalConfig(args.threshold, args.confidence, tuple(args.seeds), args.baseline)
+    total = len(pairs) * len(methods) * len(config.seeds)
+    print(
+        f"sepfm_ros eval: {len(pairs)} pairs x {len(methods)} methods x {len(config.seeds)} "
+        f"seeds = {total} runs ({len(errors)} manifest entries rejected)",
+        file=sys.stderr,
+    )
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    with tqdm(
+        total=total, unit="run", disable=args.no_progress, file=sys.stderr, dynamic_ncols=True
+    ) as bar:
+
+        def progress(steps: int, pair_id: str) -> None:
+            bar.set_postfix_str(pair_id, refresh=False)
+            bar.update(steps)
+
+        res = evaluate(pairs, methods, cache, config, errors=errors, progress=progress)
+    elapsed = time.perf_counter() - t0
+    command = "sepfm_ros eval " + shlex.join(argv)
+    notes = (
+        f"Run time: {elapsed:.0f} s for {total} runs on this machine "
+        f"(including matching uncached pairs)."
+    )
+    report = write_report(res, args.out, command=command, notes=notes)
+    if args.readme is not None:
+        try:
+            update_readme(args.readme, res, command)
+        except (OSError, ValueError) as exc:
+            print(f"sepfm_ros eval: could not update {args.readme}: {exc}", file=sys.stderr)
+            return 2
+    print(
+        f"sepfm_ros eval: {len(res.pairs)} pairs evaluated, {len(res.errors)} not "
+        f"evaluable, {elapsed:.0f} s; report: {report}",
+        file=sys.stderr,
+    )
+    for e in res.errors:
+        print(f"  {e.pair_id}: {e.message}", file=sys.stderr)
+    return 0 if res.pairs else 1

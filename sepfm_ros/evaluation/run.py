@@ -1,0 +1,195 @@
+"""Run every selected method x seed over the pairs and keep per-run results.
+
+One run = one method, one seed, one pair, on the pair's cached matches. Nothing here stops at a
+bad pair or a method that raises: the pair becomes a :class:`PairError`, the run a failure with
+its status, and the evaluation goes on.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field
+
+import numpy as np
+
+from sepfm_ros.evaluation import metrics
+from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec
+from sepfm_ros.evaluation.matches_cache import MatchesCache
+from sepfm_ros.evaluation.methods import Method, MethodResult
+
+#: Fewer putative matches than this and no compared method can run (eight-point methods).
+MIN_MATCHES = 8
+
+
+@dataclass(frozen=True)
+class EvalConfig:
+    """Settings shared by all methods: inlier threshold (px, symmetric epipolar distance),
+    RANSAC confidence, the seeds each method runs with, and the baseline of paired comparisons."""
+
+    threshold: float = 1.0
+    confidence: float = 0.99
+    seeds: tuple[int, ...] = (0, 1, 2)
+    baseline: str = "ransac8"
+
+
+@dataclass
+class Example:
+    """What the report draws for one pair: its matches, GT positives and one method's run."""
+
+    pair: PairSpec
+    pts_a: np.ndarray
+    pts_b: np.ndarray
+    positive: np.ndarray
+    method: str
+    result: MethodResult
+
+
+@dataclass
+class EvalResults:
+    """Everything the report needs.
+
+    Attributes:
+        runs: one dict per run: pair, scene, method, seed, the RunMetrics fields, has_model,
+            hypotheses / stage1_hypotheses / stage2_hypotheses (None when n/a), ms, own_inliers,
+            status, fallback, line_inliers (count, separable methods).
+        pairs: one dict per evaluated pair: pair, scene, kind, baseline, n_matches, n_positives,
+            outlier_rate, cached.
+        errors: pairs that could not be evaluated, with the reason.
+        line_inliers: (method, count) per separable run that found a line pair.
+        line_errors_est / line_errors_gt: pooled line transfer errors (px) of the line inliers
+            under the estimated F and under the GT F, first separable method, all seeds.
+        examples: scene -> Example (first evaluated pair of the scene, first seed).
+    """
+
+    config: EvalConfig
+    methods: list[str]
+    runs: list[dict] = field(default_factory=list)
+    pairs: list[dict] = field(default_factory=list)
+    errors: list[PairError] = field(default_factory=list)
+    line_inliers: list[tuple[str, int]] = field(default_factory=list)
+    line_errors_est: list[float] = field(default_factory=list)
+    line_errors_gt: list[float] = field(default_factory=list)
+    examples: dict[str, Example] = field(default_factory=dict)
+
+
+def _safe_run(method: Method, pts_a, pts_b, size_a, size_b, cfg: EvalConfig, seed: int):
+    try:
+        return method.run(pts_a, pts_b, size_a, size_b, cfg.threshold, cfg.confidence, seed)
+    except Exception as exc:  # a method that raises is a failed run, not a crashed evaluation
+        hyp = None if method.family == "opencv" else 0
+        return MethodResult(None, 0, hyp, hyp, hyp, math.nan, status=f"error: {exc!r}")
+
+
+def evaluate(
+    pairs: Sequence[PairSpec],
+    methods: Sequence[Method],
+    cache: MatchesCache,
+    config: EvalConfig | None = None,
+    errors: Sequence[PairError] = (),
+    progress: Callable[[int, str], None] | None = None,
+) -> EvalResults:
+    """Evaluate ``methods`` on ``pairs``.
+
+    Args:
+        pairs: valid pairs (from :func:`~sepfm_ros.evaluation.manifest.load_manifest`).
+        methods: from :func:`~sepfm_ros.evaluation.methods.resolve_methods`.
+        cache: where matches come from.
+        config: threshold, confidence, seeds, baseline.
+        errors: pair errors found while loading, carried into the results.
+        progress: called with (steps done since last call, current pair id); one step per run,
+            len(pairs) * len(methods) * len(seeds) in all.
+    """
+    cfg = config or EvalConfig()
+    res = EvalResults(config=cfg, methods=[m.name for m in methods], errors=list(errors))
+    steps_per_pair = len(methods) * len(cfg.seeds)
+    line_method = next((m.name for m in methods if m.separable), None)
+    for pair in pairs:
+        try:
+            pm = cache.matches(pair)
+            n = pm.pts_a.shape[0]
+            if n < MIN_MATCHES:
+                raise PairDataError(
+                    f"fewer than {MIN_MATCHES} matches ({n} with {cache.settings.features}, "
+                    f"ratio {cache.settings.ratio}): nothing to estimate from"
+                )
+        except PairDataError as exc:
+            res.errors.append(PairError(pair.pair_id, pair.scene, str(exc)))
+            if progress:
+                progress(steps_per_pair, pair.pair_id)
+            continue
+        except Exception as exc:  # e.g. cv2.error on a corrupt image
+            res.errors.append(PairError(pair.pair_id, pair.scene, f"matching failed: {exc!r}"))
+            if progress:
+                progress(steps_per_pair, pair.pair_id)
+            continue
+        size_b = pm.size_b or pm.size_a
+        positive = metrics.positives(pair.F_gt, pm.pts_a, pm.pts_b)
+        n_pos = int(np.count_nonzero(positive))
+        res.pairs.append(
+            {
+                "pair": pair.pair_id,
+                "scene": pair.scene,
+                "kind": pair.kind,
+                "baseline": pair.baseline,
+                "n_matches": n,
+                "n_positives": n_pos,
+                "outlier_rate": metrics.outlier_rate(n_pos, n),
+                "cached": pm.from_cache,
+            }
+        )
+        for method in methods:
+            for seed in cfg.seeds:
+                r = _safe_run(method, pm.pts_a, pm.pts_b, pm.size_a, size_b, cfg, seed)
+                m = metrics.run_metrics(r.F, pm.pts_a, pm.pts_b, positive, cfg.threshold)
+                rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
+                rec["seed"] = seed
+                rec.update(asdict(m))
+                rec.update(
+                    has_model=r.F is not None,
+                    hypotheses=r.hypotheses,
+                    stage1_hypotheses=r.stage1_hypotheses,
+                    stage2_hypotheses=r.stage2_hypotheses,
+                    ms=r.ms,
+                    own_inliers=r.own_inliers,
+                    status=r.status,
+                    fallback=r.fallback,
+                    line_inliers=len(r.line_inliers) if method.separable else None,
+                )
+                res.runs.append(rec)
+                if method.separable and r.line_pair is not None and len(r.line_inliers):
+                    res.line_inliers.append((method.name, len(r.line_inliers)))
+                    if method.name == line_method:
+                        _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair.F_gt)
+                if pair.scene not in res.examples and seed == cfg.seeds[0]:
+                    if method.name == (line_method or methods[0].name):
+                        res.examples[pair.scene] = Example(
+                            pair, pm.pts_a, pm.pts_b, positive, method.name, r
+                        )
+                if progress:
+                    progress(1, pair.pair_id)
+    return res
+
+
+def _collect_line_errors(res: EvalResults, r: MethodResult, pts_a, pts_b, F_gt) -> None:
+    idx = r.line_inliers
+    line_b = np.asarray(r.line_pair[1], dtype=np.float64)
+    if r.F is not None:
+        e = metrics.line_transfer_error(r.F, line_b, pts_a[idx], pts_b[idx])
+        res.line_errors_est.extend(float(x) for x in e)
+    e = metrics.line_transfer_error(F_gt, line_b, pts_a[idx], pts_b[idx])
+    res.line_errors_gt.extend(float(x) for x in e)
+
+
+def per_pair_values(runs: list[dict], method: str, key: str) -> dict[str, float]:
+    """pair id -> the seed-average of ``key`` for ``method`` (NaN when every seed is NaN)."""
+    acc: dict[str, list[float]] = {}
+    for r in runs:
+        if r["method"] == method:
+            v = r[key]
+            acc.setdefault(r["pair"], []).append(math.nan if v is None else float(v))
+    out = {}
+    for k, vals in acc.items():
+        finite = [v for v in vals if not math.isnan(v)]
+        out[k] = float(np.mean(finite)) if finite else math.nan
+    return out

@@ -44,6 +44,11 @@ setup(
         "opencv-python-headless>=4.8",
         "rosbags>=0.10",
         "rosbags-image>=0.10",
+        # `eval` (sepfm_ros.evaluation): PNG plots of the report (CDFs, trial curves), and the
+        # progress bar of long runs. Both are pure wheels; packaged as python3-matplotlib and
+        # python3-tqdm for ROS (package.xml), which has no optional dependencies.
+        "matplotlib>=3.5",
+        "tqdm>=4.60",
     ],
     extras_require={
         # ROS 2 Jazzy from PyPI wheels, for machines without a ROS install (colcon users get these

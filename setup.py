@@ -45,7 +45,7 @@ setup(
         "rosbags>=0.10",
         "rosbags-image>=0.10",
         # `eval` (sepfm_ros.evaluation): PNG plots of the report (CDFs, trial curves), and the
-        # progress bar of long runs. Both are pure wheels; packaged as python3-matplotlib and
+        # progress bar of long runs. Both install from binary wheels; packaged as python3-matplotlib and
         # python3-tqdm for ROS (package.xml), which has no optional dependencies.
         "matplotlib>=3.5",
         "tqdm>=4.60",

@@ -35,18 +35,18 @@ def enforce_rank2(F: np.ndarray) -> np.ndarray:
 
 
 def _epipolar_terms(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray):
-    """Per-model algebraic residuals and epipolar lines.
+    """Per-model algebraic residuals and the first two coordinates of the epipolar lines.
 
-    F: (3, 3) or (M, 3, 3); pts: (N, 2). Returns (r, l2, l1) with r (M, N) = x2^T F x1,
-    l2 = F x1 (M, N, 3) lines in image 2, l1 = F^T x2 (M, N, 3) lines in image 1.
+    F: (3, 3) or (M, 3, 3); pts: (N, 2). Returns (r, a2, b2, a1, b1), each (M, N): r = x2^T F x1,
+    (a2, b2) of l2 = F x1 (lines in image 2), (a1, b1) of l1 = F^T x2 (lines in image 1).
     """
     Fs = F[None] if F.ndim == 2 else F
-    x1 = homogeneous(pts1)
-    x2 = homogeneous(pts2)
-    l2 = np.einsum("mij,nj->mni", Fs, x1)
-    l1 = np.einsum("mji,nj->mni", Fs, x2)
-    r = np.einsum("ni,mni->mn", x2, l2)
-    return r, l2, l1
+    x1 = homogeneous(pts1).T  # (3, N)
+    x2 = homogeneous(pts2).T
+    l2 = Fs @ x1  # (M, 3, N), batched BLAS
+    l1 = np.swapaxes(Fs, 1, 2)[:, :2] @ x2  # only the first two rows are needed
+    r = (l2 * x2).sum(axis=1)
+    return r, l2[:, 0], l2[:, 1], l1[:, 0], l1[:, 1]
 
 
 def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -60,11 +60,9 @@ def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarra
     Returns:
         (N,) for a single F, (M, N) for a batch; inf where an epipolar line is undefined.
     """
-    r, l2, l1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
-    n2 = np.hypot(l2[..., 0], l2[..., 1])
-    n1 = np.hypot(l1[..., 0], l1[..., 1])
+    r, a2, b2, a1, b1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
     with np.errstate(divide="ignore", invalid="ignore"):
-        d = 0.5 * np.abs(r) * (1.0 / n2 + 1.0 / n1)
+        d = 0.5 * np.abs(r) * (1.0 / np.sqrt(a2 * a2 + b2 * b2) + 1.0 / np.sqrt(a1 * a1 + b1 * b1))
     d = np.where(np.isfinite(d), d, np.inf)
     return d[0] if np.asarray(F).ndim == 2 else d
 
@@ -76,8 +74,8 @@ def sampson_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.nd
 
     Shapes as :func:`symmetric_epipolar_distance`.
     """
-    r, l2, l1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
-    den = l2[..., 0] ** 2 + l2[..., 1] ** 2 + l1[..., 0] ** 2 + l1[..., 1] ** 2
+    r, a2, b2, a1, b1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
+    den = a2 * a2 + b2 * b2 + a1 * a1 + b1 * b1
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.abs(r) / np.sqrt(den)
     d = np.where(np.isfinite(d), d, np.inf)
@@ -100,3 +98,25 @@ def fundamental_from_cameras(P1: np.ndarray, P2: np.ndarray) -> np.ndarray:
     e2 = P2 @ camera_center(P1)
     F = skew(e2) @ P2 @ np.linalg.pinv(P1)
     return normalize_fundamental(F)
+
+
+def normalization_transform(pts: np.ndarray) -> np.ndarray:
+    """Hartley's similarity T (3, 3): centroid to origin, mean distance to the origin sqrt(2).
+
+    Args:
+        pts: (N, 2) pixel coordinates, N >= 1.
+    """
+    c = pts.mean(axis=0)
+    d = np.sqrt(((pts - c) ** 2).sum(axis=1)).mean()
+    s = np.sqrt(2.0) / d if d > 0 else 1.0
+    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+
+
+def apply_transform(T: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """Apply an affine 3x3 transform to (..., 2) points."""
+    return pts @ T[:2, :2].T + T[:2, 2]
+
+
+def denormalize(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
+    """F in pixels from F in normalised coordinates: F = T2^T F_n T1, batched over (..., 3, 3)."""
+    return T2.T @ F_n @ T1

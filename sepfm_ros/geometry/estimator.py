@@ -1,24 +1,314 @@
-"""PROVISIONAL placeholder (being replaced by the separable two-stage estimator)."""
+"""Public entry point: :func:`estimate_fundamental` for the separable method and its baselines.
+
+Methods (all through the same sampler, scoring, local optimisation and final refinement):
+
+============  ================================================================================
+``sep4``      line pair -> H_e (3 points, stage 1) -> 3 fixed + 4 sampled, seven-point (stage 2)
+``sep5``      as sep4 with 3 fixed + 5 sampled, eight-point
+``sep4-lmeds`` / ``sep5-lmeds``  the same with least-median scoring
+``ransac7``   standard RANSAC, seven-point, MSAC scoring
+``ransac8``   standard RANSAC, eight-point, MSAC scoring
+``lmeds7``    least median of squares, seven-point
+============  ================================================================================
+"""
 
 from __future__ import annotations
+
+import time
+from typing import Any
 
 import cv2
 import numpy as np
 
 from sepfm_ros.geometry.epipolar import normalize_fundamental, symmetric_epipolar_distance
 from sepfm_ros.geometry.estimate import Estimate
+from sepfm_ros.geometry.fundamental_problem import Correspondences, FundamentalProblem
+from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
+from sepfm_ros.geometry.line_pairs import LineSearchOptions, find_line_pairs, working_scale
+from sepfm_ros.geometry.ransac import RaceOptions, run_ransac
+from sepfm_ros.geometry.refine import fit_least_squares, refine_sampson
 
-METHODS = ("sep4", "sep5", "sep4-lmeds", "sep5-lmeds", "ransac7", "ransac8", "lmeds7")
+# method -> (separable?, solver, scoring)
+_METHODS: dict[str, tuple[bool, str, str]] = {
+    "sep4": (True, "seven", "msac"),
+    "sep5": (True, "eight", "msac"),
+    "sep4-lmeds": (True, "seven", "lmeds"),
+    "sep5-lmeds": (True, "eight", "lmeds"),
+    "ransac7": (False, "seven", "msac"),
+    "ransac8": (False, "eight", "msac"),
+    "lmeds7": (False, "seven", "lmeds"),
+}
+METHODS = tuple(_METHODS)
+
+_DEFAULTS: dict[str, Any] = {
+    "max_samples": 10000,  # cap on RANSAC samples (stage 2 / standard), all arms together
+    "refine": True,  # Sampson refinement of the final model
+    "hough_width": 512,  # working resolution of the line search (px)
+    "hough_min_votes": 4,
+    "line_distance": 1.5,  # C: point-line incidence distance, working px
+    "hough_points": 300,  # best matches drawn into the binary images
+    "max_line_pairs": 4,  # line pairs that race in stage 2
+    "line_threshold": 0.5,  # T1: H_e inlier threshold, working px
+    "min_line_inliers": 4,
+    "triple": "raw",  # "raw" sample points or "synthesized" from the refined H_e
+    "plane_ratio": 0.9,  # inlier share on one homography flagged as a dominant plane
+}
 
 
-def estimate_fundamental(pts1, pts2, image_size1, image_size2=None, method="sep5",
-                         threshold=1.0, confidence=0.99, seed=None, **options) -> Estimate:
-    pts1 = np.asarray(pts1, dtype=np.float64)
-    pts2 = np.asarray(pts2, dtype=np.float64)
-    n = pts1.shape[0]
-    F, _ = cv2.findFundamentalMat(pts1, pts2, cv2.FM_RANSAC, threshold, confidence)
-    if F is None or F.shape != (3, 3):
-        return Estimate(F=None, inliers=np.zeros(n, bool), status="no model", method=method)
-    F = normalize_fundamental(F)
-    inl = symmetric_epipolar_distance(F, pts1, pts2) < threshold
-    return Estimate(F=F, inliers=inl, method=method)
+def _validate_points(pts1: Any, pts2: Any, min_points: int) -> tuple[np.ndarray, np.ndarray]:
+    p1 = np.asarray(pts1, dtype=np.float64)
+    p2 = np.asarray(pts2, dtype=np.float64)
+    for name, p in (("pts1", p1), ("pts2", p2)):
+        if p.ndim != 2 or p.shape[1] != 2:
+            raise ValueError(f"{name} must have shape (N, 2), got {p.shape}")
+    if p1.shape != p2.shape:
+        raise ValueError(f"pts1 and pts2 must have the same shape, got {p1.shape} and {p2.shape}")
+    if p1.shape[0] < min_points:
+        raise ValueError(f"need at least {min_points} correspondences, got {p1.shape[0]}")
+    bad = ~(np.isfinite(p1).all(axis=1) & np.isfinite(p2).all(axis=1))
+    if bad.any():
+        raise ValueError(
+            f"{int(bad.sum())} correspondences contain NaN or inf (first at index "
+            f"{int(np.flatnonzero(bad)[0])})"
+        )
+    rows = np.concatenate([p1, p2], axis=1)
+    _, first, counts = np.unique(rows, axis=0, return_index=True, return_counts=True)
+    if (counts > 1).any():
+        raise ValueError(
+            f"{int((counts - 1).sum())} duplicate correspondences (e.g. the match at index "
+            f"{int(first[np.argmax(counts > 1)])} appears {int(counts.max())} times); "
+            "remove duplicates first"
+        )
+    return p1, p2
+
+
+def _validate_size(size: Any, name: str) -> tuple[float, float]:
+    if size is None:
+        raise ValueError(f"{name} is required: (width, height) in pixels")
+    try:
+        w, h = (float(v) for v in size)
+    except (TypeError, ValueError) as exc:
+        raise ValueError(f"{name} must be (width, height), got {size!r}") from exc
+    if not (np.isfinite(w) and np.isfinite(h) and w > 0 and h > 0):
+        raise ValueError(f"{name} must be positive and finite, got {size!r}")
+    return w, h
+
+
+def _degeneracy(p1: np.ndarray, p2: np.ndarray, threshold: float) -> str | None:
+    """A reason why no F can be determined from these points, or None."""
+    for name, p in (("image 1", p1), ("image 2", p2)):
+        c = p - p.mean(axis=0)
+        s = np.linalg.svd(c, compute_uv=False)
+        if s[0] == 0 or s[1] <= 1e-6 * s[0]:
+            return f"degenerate: all points on one line in {name}"
+    if np.median(np.linalg.norm(p2 - p1, axis=1)) < 0.1 * threshold:
+        return "degenerate: no motion (points do not move between the images)"
+    return None
+
+
+def _dominant_plane(p1: np.ndarray, p2: np.ndarray, threshold: float, ratio: float) -> str | None:
+    """Flag F whose inliers are mostly explained by one homography (F is then unreliable)."""
+    if len(p1) < 8:
+        return None
+    H, mask = cv2.findHomography(p1, p2, cv2.RANSAC, 2.0 * threshold, maxIters=500, confidence=0.99)
+    if H is None or mask is None:
+        return None
+    share = float(mask.ravel().astype(bool).mean())
+    if share >= ratio:
+        return f"degenerate: dominant plane ({100 * share:.0f}% of inliers fit one homography)"
+    return None
+
+
+def _triples(fit: LineHomographyFit, p1: np.ndarray, p2: np.ndarray, kind: str):
+    """The 3 fixed correspondences for stage 2: the H_e inliers at min, median and max t."""
+    from sepfm_ros.geometry.line_pairs import line_parameter
+
+    inl = fit.inliers
+    t = line_parameter(p1[inl], fit.ctrl1)
+    order = np.argsort(t)
+    pick = inl[order[[0, len(order) // 2, -1]]]
+    if kind == "synthesized":
+        return fit.map_points(t[order[[0, len(order) // 2, -1]]])
+    return p1[pick], p2[pick]
+
+
+def estimate_fundamental(
+    pts1: Any,
+    pts2: Any,
+    image_size1: Any,
+    image_size2: Any = None,
+    method: str = "sep5",
+    threshold: float = 1.0,
+    confidence: float = 0.99,
+    seed: int | None = None,
+    **options: Any,
+) -> Estimate:
+    """Estimate F (x2^T F x1 = 0) from putative matches with the separable method or a baseline.
+
+    Args:
+        pts1, pts2: (N, 2) pixel coordinates in image 1 and 2, best matches first if known.
+        image_size1, image_size2: (width, height) in px; image_size2 defaults to image_size1.
+        method: one of :data:`METHODS`.
+        threshold: inlier threshold, px of symmetric epipolar distance.
+        confidence: RANSAC confidence for adaptive termination F(k, r).
+        seed: seed of the ``numpy.random.Generator`` behind every random choice.
+        **options: see ``_DEFAULTS`` in this module (max_samples, refine, hough_width,
+            hough_min_votes, line_distance, hough_points, max_line_pairs, line_threshold,
+            min_line_inliers, triple, plane_ratio).
+    Raises:
+        ValueError: unknown method or option, malformed points or sizes, too few points.
+    """
+    t_start = time.perf_counter()
+    if method not in _METHODS:
+        raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
+    unknown = set(options) - set(_DEFAULTS)
+    if unknown:
+        raise ValueError(f"unknown options {sorted(unknown)}; known: {sorted(_DEFAULTS)}")
+    opt = {**_DEFAULTS, **options}
+    if not (np.isfinite(threshold) and threshold > 0):
+        raise ValueError(f"threshold must be positive, got {threshold}")
+    if not 0.0 < confidence < 1.0:
+        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
+    if opt["triple"] not in ("raw", "synthesized"):
+        raise ValueError(f"triple must be 'raw' or 'synthesized', got {opt['triple']!r}")
+    separable, solver, scoring = _METHODS[method]
+    min_points = 7 if solver == "seven" else 8
+    size1 = _validate_size(image_size1, "image_size1")
+    size2 = _validate_size(image_size1 if image_size2 is None else image_size2, "image_size2")
+    p1, p2 = _validate_points(pts1, pts2, min_points)
+    n = len(p1)
+    rng = np.random.default_rng(seed)
+    est = Estimate(F=None, inliers=np.zeros(n, dtype=bool), method=method)
+
+    reason = _degeneracy(p1, p2, threshold)
+    if reason is not None:
+        est.status = reason
+        est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
+        return est
+
+    data = Correspondences.from_pixels(p1, p2)
+    max_samples = int(opt["max_samples"])
+
+    def standard(initial=None):
+        arm = FundamentalProblem(data, solver, threshold, scoring)
+        return run_ransac([arm], rng, confidence, max_samples, initial=initial)
+
+    result = None
+    if separable:
+        t0 = time.perf_counter()
+        lopts = LineSearchOptions(
+            width=int(opt["hough_width"]),
+            min_votes=int(opt["hough_min_votes"]),
+            distance=float(opt["line_distance"]),
+            hough_points=int(opt["hough_points"]),
+            max_pairs=max(1, int(opt["max_line_pairs"])) + 2,
+        )
+        pairs = find_line_pairs(p1, p2, size1, size2, lopts)
+        t1 = time.perf_counter()
+        est.timings_ms["lines"] = 1e3 * (t1 - t0)
+        s1 = working_scale(size1, lopts.width)
+        s2 = working_scale(size2, lopts.width)
+        fits: list[LineHomographyFit] = []
+        for pair in pairs:
+            fit, h = fit_line_homography(
+                pair,
+                p1,
+                p2,
+                size1,
+                size2,
+                s1,
+                s2,
+                rng,
+                threshold=float(opt["line_threshold"]),
+                confidence=confidence,
+                min_inliers=int(opt["min_line_inliers"]),
+            )
+            est.stage1_hypotheses += h
+            if fit is not None:
+                fits.append(fit)
+            if len(fits) >= int(opt["max_line_pairs"]):
+                break
+        t2 = time.perf_counter()
+        est.timings_ms["stage1"] = 1e3 * (t2 - t1)
+        if fits:
+            arms = []
+            for fit in fits:
+                f1, f2 = _triples(fit, p1, p2, opt["triple"])
+                pool = np.setdiff1d(np.arange(n), fit.pair.support)
+                if len(pool) < (7 if solver == "seven" else 8) - 3:
+                    continue
+                arms.append(FundamentalProblem(data, solver, threshold, scoring, f1, f2, pool))
+            if arms:
+                result = run_ransac(arms, rng, confidence, max_samples, race=RaceOptions())
+                est.stage2_hypotheses += result.hypotheses
+                if result.leader >= 0:
+                    best = fits[result.leader]
+                    est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
+                    est.line_inliers = best.inliers
+        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
+        if result is None or not result.converged:
+            # no usable line pair, or stage 2 hit its cap (a wrong fixed triple is the usual
+            # cause): standard RANSAC, starting from the best model so far
+            t3 = time.perf_counter()
+            initial = None
+            if result is not None and result.model is not None:
+                initial = (result.model, result.cost, result.count)
+            result = standard(initial)
+            est.fallback = True
+            est.stage2_hypotheses += result.hypotheses
+            est.timings_ms["fallback"] = 1e3 * (time.perf_counter() - t3)
+    else:
+        t2 = time.perf_counter()
+        result = standard()
+        est.stage2_hypotheses = result.hypotheses
+        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
+    est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
+
+    t4 = time.perf_counter()
+    F = result.model
+    if F is None:
+        est.status = "no model: every sample was degenerate"
+        est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
+        return est
+    F = _final_model(F, p1, p2, threshold, scoring, bool(opt["refine"]))
+    est.F = F
+    est.inliers = symmetric_epipolar_distance(F, p1, p2) < threshold
+    est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
+    k = est.num_inliers
+    if k < 8:
+        est.status = f"degenerate: only {k} inliers"
+    else:
+        plane = _dominant_plane(
+            p1[est.inliers], p2[est.inliers], threshold, float(opt["plane_ratio"])
+        )
+        if plane is not None:
+            est.status = plane
+    est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
+    return est
+
+
+def _final_model(
+    F: np.ndarray, p1: np.ndarray, p2: np.ndarray, threshold: float, scoring: str, refine: bool
+) -> np.ndarray:
+    """Refit on all inliers (normalised eight-point), then optional Sampson refinement.
+
+    A refit is kept only if it does not increase the robust cost (MSAC); rank 2 is enforced.
+    """
+
+    def cost(G: np.ndarray) -> float:
+        d = symmetric_epipolar_distance(G, p1, p2)
+        return float(np.minimum(d * d, threshold * threshold).sum())
+
+    best, best_cost = normalize_fundamental(F), cost(F)
+    for _ in range(3):
+        inl = symmetric_epipolar_distance(best, p1, p2) < threshold
+        if np.count_nonzero(inl) < 8:
+            break
+        G = fit_least_squares(p1[inl], p2[inl])
+        if refine:
+            G = refine_sampson(G, p1[inl], p2[inl])
+        c = cost(G)
+        if c >= best_cost:
+            break
+        best, best_cost = normalize_fundamental(G), c
+    return best

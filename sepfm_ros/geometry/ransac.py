@@ -3,6 +3,10 @@
 from __future__ import annotations
 
 import math
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
 
 
 def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | None = None) -> int:
@@ -37,3 +41,208 @@ def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | 
     if n == math.inf:
         raise ValueError("F(k, r) is infinite for r = 1; pass max_trials")
     return max(1, int(n))
+
+
+# --------------------------------------------------------------------------------------------
+# The generic RANSAC loop (sample, minimal solve, score, local optimisation, adaptive stopping).
+# Estimators plug in as `Problem`s; several problems ("arms") can race in one loop, which is how
+# the separable estimator tries several line pairs and drops the ones whose support lags.
+# --------------------------------------------------------------------------------------------
+
+
+class Problem(Protocol):
+    """One RANSAC arm: what to sample, how to solve a sample, how to score a model."""
+
+    n: int  #: number of data points the inlier ratio refers to
+    sample_size: int  #: points drawn per sample (the k of F(k, r))
+    pool: np.ndarray  #: (P,) indices eligible for sampling
+
+    def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, k) pool indices -> (models (K, ...), sample index of each model (K,))."""
+
+    def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(K, ...) models -> (cost (K,), lower is better; inlier count (K,))."""
+
+    def local_optimize(self, model: np.ndarray) -> np.ndarray:
+        """Models (J, ...) refined from ``model`` and its inliers (J may be 0)."""
+
+
+@dataclass
+class RaceOptions:
+    """How several arms share one RANSAC run.
+
+    Attributes:
+        add_after: total samples after which arm i+1 joins (arm 0 starts alone); arms beyond
+            the list join when the previous entry times ``add_growth`` has been spent.
+        drop_ratio: an arm whose best inlier count is below ``drop_ratio`` times the leader's...
+        drop_alpha: ...after enough samples that a good arm would have found an all-inlier
+            sample with probability ``1 - drop_alpha`` is dropped.
+    """
+
+    add_after: tuple[int, ...] = (12,)
+    add_growth: float = 2.0
+    drop_ratio: float = 0.8
+    drop_alpha: float = 0.1
+
+
+@dataclass
+class RansacResult:
+    model: Any
+    cost: float
+    count: int
+    leader: int  #: index of the arm that produced the model (-1 when none)
+    hypotheses: int  #: models scored (minimal-sample models and local-optimisation models)
+    samples: list[int] = field(default_factory=list)  #: samples drawn per arm
+    dropped: list[int] = field(default_factory=list)  #: arms dropped for lagging support
+    converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
+
+
+def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> np.ndarray:
+    """(b, k) samples of k distinct entries of ``pool`` each, uniformly at random."""
+    P = pool.shape[0]
+    if P < k:
+        raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
+    out = np.empty((0, k), dtype=np.int64)
+    while out.shape[0] < b:
+        m = int((b - out.shape[0]) * 1.3) + 4
+        if P < 4 * k:  # small pools: exact sampling without replacement
+            idx = np.argsort(rng.random((m, P)), axis=1)[:, :k]
+        else:
+            idx = rng.integers(0, P, size=(m, k))
+            srt = np.sort(idx, axis=1)
+            idx = idx[np.all(srt[:, 1:] != srt[:, :-1], axis=1)]
+        out = np.concatenate([out, idx])
+    return pool[out[:b]]
+
+
+def _trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
+    w = min(1.0, count / n) if n > 0 else 0.0
+    if w <= 0.0:
+        return cap
+    return ransac_trials(k, 1.0 - w, confidence, max_trials=cap)
+
+
+def run_ransac(
+    arms: list[Problem],
+    rng: np.random.Generator,
+    confidence: float = 0.99,
+    max_samples: int = 10000,
+    min_samples: int = 1,
+    race: RaceOptions | None = None,
+    batch: int = 64,
+    initial: tuple[Any, float, int] | None = None,
+) -> RansacResult:
+    """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
+
+    Arm 0 starts; further arms join on the ``race`` schedule and are dropped when their support
+    lags (see :class:`RaceOptions`). The loop stops when the leading arm (the one holding the
+    best model) has drawn F(k, r) samples for the inlier ratio of the best model, or when
+    ``max_samples`` samples were drawn in all.
+
+    Args:
+        arms: problems to sample; all score against the same data.
+        rng: the random generator (seeded by the caller).
+        confidence: RANSAC confidence p.
+        max_samples: cap on the total number of samples over all arms.
+        min_samples: samples the leading arm draws at least before stopping.
+        race: racing options (only used with more than one arm).
+        batch: most samples one arm solves and scores in one vectorised call.
+        initial: optional (model, cost, count) from an earlier run to start from.
+    """
+    race = race or RaceOptions()
+    n_arms = len(arms)
+    samples = [0] * n_arms
+    arm_best = [-1] * n_arms  # best inlier count per arm
+    active = [0]
+    joined = 1
+    dropped: list[int] = []
+    best_model, best_cost, best_count, leader = None, np.inf, -1, -1
+    if initial is not None:
+        best_model, best_cost, best_count = initial
+    hypotheses = 0
+    total = 0
+    next_join = race.add_after[0] if race.add_after else max_samples
+    converged = False
+
+    while active:
+        # one round: every active arm draws a batch sized by what it still needs
+        for a in list(active):
+            arm = arms[a]
+            need = _trials_needed(
+                arm.sample_size, max(best_count, 0), arm.n, confidence, max_samples
+            )
+            need = max(need, min_samples)
+            # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
+            b = int(np.clip(need - samples[a], 1, min(batch, max(1, samples[a]))))
+            b = min(b, max_samples - total)
+            if b <= 0:
+                continue
+            smp = draw_samples(rng, arm.pool, arm.sample_size, b)
+            samples[a] += b
+            total += b
+            models, _ = arm.solve(smp)
+            if len(models) == 0:
+                continue
+            cost, count = arm.score(models)
+            hypotheses += len(models)
+            i = int(np.argmin(cost))
+            arm_best[a] = max(arm_best[a], int(count.max()))
+            if cost[i] < best_cost:
+                best_model, best_cost, best_count, leader = (
+                    models[i],
+                    float(cost[i]),
+                    int(count[i]),
+                    a,
+                )
+                # local optimisation of the new best (LO-RANSAC)
+                lo = arm.local_optimize(best_model)
+                if len(lo):
+                    lcost, lcount = arm.score(lo)
+                    hypotheses += len(lo)
+                    j = int(np.argmin(lcost))
+                    if lcost[j] < best_cost:
+                        best_model, best_cost, best_count = lo[j], float(lcost[j]), int(lcount[j])
+                arm_best[a] = max(arm_best[a], best_count)
+        # adaptive stopping on the leading arm
+        if leader >= 0:
+            arm = arms[leader]
+            need = _trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
+            if samples[leader] >= max(need, min_samples):
+                converged = True
+                break
+        if total >= max_samples:
+            break
+        # racing: drop lagging arms, let the next arm join on schedule
+        if n_arms > 1 and best_count > 0:
+            for a in list(active):
+                if a == leader or arm_best[a] >= race.drop_ratio * best_count:
+                    continue
+                w = min(1.0, best_count / arms[a].n)
+                enough = np.log(race.drop_alpha) / np.log(
+                    max(1e-300, 1.0 - w ** arms[a].sample_size)
+                )
+                if samples[a] >= enough:
+                    active.remove(a)
+                    dropped.append(a)
+        if joined < n_arms and total >= next_join:
+            active.append(joined)
+            joined += 1
+            idx = joined - 1
+            next_join = (
+                race.add_after[idx]
+                if idx < len(race.add_after)
+                else int(np.ceil(next_join * race.add_growth))
+            )
+        if not active and joined < n_arms:
+            active.append(joined)
+            joined += 1
+    return RansacResult(
+        model=best_model,
+        cost=best_cost,
+        count=max(best_count, 0),
+        leader=leader,
+        hypotheses=hypotheses,
+        samples=samples,
+        dropped=dropped,
+        converged=converged,
+    )

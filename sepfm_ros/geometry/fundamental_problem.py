@@ -1,0 +1,135 @@
+"""The fundamental-matrix RANSAC problem: seven- or eight-point samples, optionally with fixed
+correspondences (the separable method's stage 2), symmetric-epipolar scoring, and LO refits.
+
+Every method of :func:`sepfm_ros.geometry.estimate_fundamental` (ours and the baselines) samples,
+solves, scores and refines through this one class, so their comparison is fair.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sepfm_ros.geometry.epipolar import (
+    apply_transform,
+    denormalize,
+    normalization_transform,
+    symmetric_epipolar_distance,
+)
+from sepfm_ros.geometry.refine import fit_least_squares, refine_sampson
+from sepfm_ros.geometry.solvers import eight_point, seven_point
+
+SCORINGS = ("msac", "lmeds")
+
+
+@dataclass
+class Correspondences:
+    """Matches in pixels and in Hartley-normalised coordinates (computed once per estimate).
+
+    pts1, pts2: (N, 2) pixels. x1, x2: (N, 2) normalised. T1, T2: (3, 3) normalisations.
+    """
+
+    pts1: np.ndarray
+    pts2: np.ndarray
+    x1: np.ndarray
+    x2: np.ndarray
+    T1: np.ndarray
+    T2: np.ndarray
+
+    @classmethod
+    def from_pixels(cls, pts1: np.ndarray, pts2: np.ndarray) -> Correspondences:
+        T1 = normalization_transform(pts1)
+        T2 = normalization_transform(pts2)
+        return cls(pts1, pts2, apply_transform(T1, pts1), apply_transform(T2, pts2), T1, T2)
+
+    def __len__(self) -> int:
+        return int(self.pts1.shape[0])
+
+
+def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
+    """(K, N) distances in px -> (cost (K,), inlier count (K,)).
+
+    msac: sum of min(d^2, t^2) (truncated quadratic); lmeds: median of d^2.
+    """
+    count = np.count_nonzero(d < threshold, axis=1)
+    if scoring == "lmeds":
+        cost = np.median(d * d, axis=1)
+    else:
+        cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
+    return cost, count
+
+
+class FundamentalProblem:
+    """One RANSAC arm estimating F.
+
+    Args:
+        data: the correspondences.
+        solver: "seven" (seven-point, k = 7 - f) or "eight" (eight-point, k = 8 - f).
+        threshold: inlier threshold in px of symmetric epipolar distance.
+        scoring: "msac" or "lmeds".
+        fixed1, fixed2: (f, 2) pixel correspondences kept in every sample (f = 0 or 3).
+        pool: indices of ``data`` eligible for sampling (default: all).
+    """
+
+    def __init__(
+        self,
+        data: Correspondences,
+        solver: str = "seven",
+        threshold: float = 1.0,
+        scoring: str = "msac",
+        fixed1: np.ndarray | None = None,
+        fixed2: np.ndarray | None = None,
+        pool: np.ndarray | None = None,
+    ) -> None:
+        if solver not in ("seven", "eight"):
+            raise ValueError(f"unknown solver {solver!r}")
+        if scoring not in SCORINGS:
+            raise ValueError(f"unknown scoring {scoring!r}; expected one of {SCORINGS}")
+        self.data = data
+        self.solver = solver
+        self.threshold = float(threshold)
+        self.scoring = scoring
+        f = 0 if fixed1 is None else len(fixed1)
+        self.f1 = np.zeros((0, 2)) if fixed1 is None else apply_transform(data.T1, fixed1)
+        self.f2 = np.zeros((0, 2)) if fixed2 is None else apply_transform(data.T2, fixed2)
+        self.sample_size = (7 if solver == "seven" else 8) - f
+        self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
+        self.n = len(data)
+
+    def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
+        B = samples.shape[0]
+        x1 = np.concatenate(
+            [np.broadcast_to(self.f1, (B,) + self.f1.shape), self.data.x1[samples]], axis=1
+        )
+        x2 = np.concatenate(
+            [np.broadcast_to(self.f2, (B,) + self.f2.shape), self.data.x2[samples]], axis=1
+        )
+        if self.solver == "seven":
+            F_n, sid = seven_point(x1, x2)
+        else:
+            F_n, sid = eight_point(x1, x2), np.arange(B)
+        F = denormalize(F_n, self.data.T1, self.data.T2)
+        F /= np.linalg.norm(F.reshape(-1, 9), axis=1)[:, None, None]
+        return F, sid
+
+    def distances(self, F: np.ndarray) -> np.ndarray:
+        """(K, 3, 3) -> (K, N) symmetric epipolar distances in px."""
+        return symmetric_epipolar_distance(F, self.data.pts1, self.data.pts2)
+
+    def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        return score_distances(self.distances(models), self.threshold, self.scoring)
+
+    def local_optimize(self, model: np.ndarray) -> np.ndarray:
+        """Least-squares refit on the inliers of ``model``, then a Sampson (IRLS) refinement."""
+        inl = self.distances(model[None])[0] < self.threshold
+        if np.count_nonzero(inl) < 8:
+            return np.zeros((0, 3, 3))
+        p1, p2 = self.data.pts1, self.data.pts2
+        F1 = fit_least_squares(p1[inl], p2[inl])
+        inl1 = self.distances(F1[None])[0] < self.threshold
+        if np.count_nonzero(inl1) < 8:
+            return F1[None]
+        F2 = refine_sampson(F1, p1[inl1], p2[inl1], iterations=3)
+        return np.stack([F1, F2])

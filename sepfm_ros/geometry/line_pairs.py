@@ -1,0 +1,169 @@
+"""Line-pair search (paper Sec. 4): Hough lines on binary images of the matched points and the
+joint accumulator A(m, n) = number of correspondences whose point in image 1 lies on line m and
+whose point in image 2 lies on line n.
+
+The paper's accumulator is N x K1 x K2; summed over the correspondences it is the product of the
+two point-line incidence matrices, A = I1^T I2 (K1 x K2), which is what we compute.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+
+@dataclass(frozen=True)
+class LinePair:
+    """Two corresponding image lines and the correspondences on both.
+
+    line1, line2: (3,) lines (a, b, c) in pixels of image 1 / 2, a u + b v + c = 0, a^2 + b^2 = 1.
+    support: (K,) indices of the correspondences within C of both lines.
+    """
+
+    line1: np.ndarray
+    line2: np.ndarray
+    support: np.ndarray
+
+
+@dataclass(frozen=True)
+class LineSearchOptions:
+    """Parameters of the line-pair search.
+
+    width: working resolution (px) of the binary images; points are scaled by width / image width.
+    min_votes: minimum Hough votes of a line (the paper's "at least four correspondences").
+    distance: C, the point-to-line incidence distance, in px at the working resolution.
+    hough_points: how many of the best-ranked matches are drawn into the binary images (all
+        matches are then tested for incidence). Drawing every match makes Hough find thousands of
+        spurious lines on textured scenes.
+    max_lines: most lines kept per image (strongest first).
+    max_pairs: most line pairs returned (best joint count first, overlapping supports suppressed).
+    """
+
+    width: int = 512
+    min_votes: int = 4
+    distance: float = 1.5
+    hough_points: int = 300
+    max_lines: int = 150
+    max_pairs: int = 6
+
+
+def working_scale(image_size: tuple[float, float], width: int) -> float:
+    """Scale factor from image pixels to the working resolution (working width / image width)."""
+    return float(width) / float(image_size[0])
+
+
+def hough_lines(
+    pts: np.ndarray, image_size: tuple[float, float], opts: LineSearchOptions
+) -> np.ndarray:
+    """Lines through the points, strongest first.
+
+    Args:
+        pts: (N, 2) pixel coordinates (only these are drawn).
+        image_size: (width, height) in px.
+    Returns:
+        (L, 3) lines in image pixels (a, b, c), a^2 + b^2 = 1, L <= opts.max_lines.
+    """
+    s = working_scale(image_size, opts.width)
+    w = max(1, int(np.ceil(image_size[0] * s)))
+    h = max(1, int(np.ceil(image_size[1] * s)))
+    img = np.zeros((h, w), dtype=np.uint8)
+    q = np.rint(pts * s).astype(np.int64)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
+    img[q[ok, 1], q[ok, 0]] = 255
+    found = cv2.HoughLines(img, 1.0, np.pi / 180.0, int(opts.min_votes))
+    if found is None:
+        return np.zeros((0, 3))
+    rho, theta = found[: opts.max_lines, 0, 0].astype(np.float64), found[: opts.max_lines, 0, 1]
+    theta = theta.astype(np.float64)
+    return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
+
+
+def incidence(
+    pts: np.ndarray, lines: np.ndarray, image_size: tuple[float, float], opts: LineSearchOptions
+) -> np.ndarray:
+    """(N, L) bool: point i within C (working-resolution px) of line j."""
+    s = working_scale(image_size, opts.width)
+    d = np.abs(pts @ lines[:, :2].T + lines[:, 2]) * s
+    return d < opts.distance
+
+
+def find_line_pairs(
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    image_size1: tuple[float, float],
+    image_size2: tuple[float, float],
+    opts: LineSearchOptions | None = None,
+) -> list[LinePair]:
+    """Candidate line pairs ranked by joint count (paper Sec. 4, extended to several pairs).
+
+    Pairs are taken greedily in decreasing joint count; a pair whose support shares more than
+    half of its correspondences with an already chosen pair is skipped (Hough returns many
+    near-duplicate lines through the same points). Only pairs with at least ``min_votes``
+    correspondences are returned.
+
+    Args:
+        pts1, pts2: (N, 2) matched points in pixels, best matches first.
+    """
+    opts = opts or LineSearchOptions()
+    m = min(len(pts1), opts.hough_points)
+    L1 = hough_lines(pts1[:m], image_size1, opts)
+    L2 = hough_lines(pts2[:m], image_size2, opts)
+    if len(L1) == 0 or len(L2) == 0:
+        return []
+    I1 = incidence(pts1, L1, image_size1, opts)
+    I2 = incidence(pts2, L2, image_size2, opts)
+    A = I1.T.astype(np.float32) @ I2.astype(np.float32)  # (K1, K2) joint accumulator
+    flat = A.ravel()
+    cand = np.flatnonzero(flat >= opts.min_votes)
+    if cand.size == 0:
+        return []
+    cand = cand[np.argsort(-flat[cand], kind="stable")][: 50 * opts.max_pairs]
+    chosen: list[LinePair] = []
+    used = np.zeros(len(pts1), dtype=np.int64)  # how many chosen supports each match is in
+    for c in cand:
+        i, j = divmod(int(c), A.shape[1])
+        support = np.flatnonzero(I1[:, i] & I2[:, j])
+        if np.count_nonzero(used[support]) * 2 > len(support):
+            continue
+        chosen.append(LinePair(L1[i], L2[j], support))
+        used[support] += 1
+        if len(chosen) >= opts.max_pairs:
+            break
+    return chosen
+
+
+def control_points(line: np.ndarray, image_size: tuple[float, float]) -> np.ndarray:
+    """The paper's control points: where ``line`` meets the image border.
+
+    Args:
+        line: (3,) (a, b, c) in pixels. image_size: (width, height).
+    Returns:
+        (2, 2) the two border points farthest apart (pixel centres span [0, w-1] x [0, h-1]);
+        for a line missing the image, the two points of the line closest to the image corners.
+    """
+    a, b, c = line
+    w, h = float(image_size[0]) - 1.0, float(image_size[1]) - 1.0
+    pts = []
+    if abs(b) > 1e-12:
+        for u in (0.0, w):
+            pts.append((u, -(a * u + c) / b))
+    if abs(a) > 1e-12:
+        for v in (0.0, h):
+            pts.append((-(b * v + c) / a, v))
+    P = np.array(pts)
+    inside = (P[:, 0] >= -1e-6) & (P[:, 0] <= w + 1e-6) & (P[:, 1] >= -1e-6) & (P[:, 1] <= h + 1e-6)
+    Q = P[inside] if np.count_nonzero(inside) >= 2 else P
+    d = np.linalg.norm(Q[:, None] - Q[None], axis=2)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    if d[i, j] < 1e-9:  # degenerate: use a unit segment along the line
+        p0 = -c * np.array([a, b])
+        return np.array([p0, p0 + np.array([-b, a])])
+    return np.array([Q[i], Q[j]])
+
+
+def line_parameter(pts: np.ndarray, ctrl: np.ndarray) -> np.ndarray:
+    """Parameter t of the projection of (K, 2) points onto segment ctrl (2, 2): c1 + t (c2 - c1)."""
+    d = ctrl[1] - ctrl[0]
+    return (pts - ctrl[0]) @ d / (d @ d)

@@ -1,0 +1,56 @@
+"""The paper's 2x2 epipolar line homography H_e between two image lines (1D projective map).
+
+A point on line l is written as alpha * x_1 + beta * x_2 in its two control points; H_e maps
+(alpha, beta) of a point on l to (alpha', beta') of its correspondence on l', up to scale:
+(alpha', beta')^T ~ H_e (alpha, beta)^T. Each correspondence gives one linear equation in
+h = (a, b, c, d):  alpha' (c alpha + d beta) - beta' (a alpha + b beta) = 0.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def _rows(ab1: np.ndarray, ab2: np.ndarray) -> np.ndarray:
+    """(..., K, 2) x 2 -> (..., K, 4) rows of the H_e equations."""
+    a1, b1 = ab1[..., 0], ab1[..., 1]
+    a2, b2 = ab2[..., 0], ab2[..., 1]
+    return np.stack([-b2 * a1, -b2 * b1, a2 * a1, a2 * b1], axis=-1)
+
+
+def line_homography_3pt(ab1: np.ndarray, ab2: np.ndarray) -> np.ndarray:
+    """Minimal solver: H_e from 3 correspondences of 1D projective points, batched.
+
+    Args:
+        ab1, ab2: (M, 3, 2) (alpha, beta) coordinates of the points on line 1 and line 2.
+    Returns:
+        (M, 2, 2) H_e with unit Frobenius norm (the null vector of the 3x4 system).
+    """
+    A = _rows(ab1, ab2)
+    A = np.concatenate([A, np.zeros(A.shape[:-2] + (1, 4))], axis=-2)
+    _, _, Vt = np.linalg.svd(A)
+    return Vt[..., -1, :].reshape(*A.shape[:-2], 2, 2)
+
+
+def line_homography_lsq(ab1: np.ndarray, ab2: np.ndarray) -> np.ndarray:
+    """Least-squares H_e from K >= 3 correspondences: ab1, ab2 (K, 2) -> (2, 2)."""
+    A = _rows(ab1, ab2)
+    _, _, Vt = np.linalg.svd(A)
+    return Vt[-1].reshape(2, 2)
+
+
+def transfer(H: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """Map line parameters t (point = c_1 + t (c_2 - c_1), i.e. (alpha, beta) = (1 - t, t)).
+
+    Args:
+        H: (M, 2, 2) or (2, 2) line homographies.
+        t: (N,) parameters on line 1.
+    Returns:
+        (M, N) or (N,) parameters t' on line 2 (inf where the image point is at infinity).
+    """
+    ab = np.stack([1.0 - t, t], axis=-1)  # (N, 2)
+    out = np.einsum("...ij,nj->...ni", H, ab)
+    den = out[..., 0] + out[..., 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tp = out[..., 1] / den
+    return np.where(np.isfinite(tp), tp, np.inf)

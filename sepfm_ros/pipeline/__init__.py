@@ -1,1 +1,1 @@
-"""Pipeline layer: images -> features -> matches -> estimate (shared by the node and offline tools)."""
+"""Pipeline layer: images -> features -> matches -> estimate (shared by node and offline tools)."""

@@ -23,8 +23,10 @@ import time
 from collections import OrderedDict
 from collections.abc import Hashable
 from dataclasses import dataclass, field, replace
+from functools import cache
 from typing import Any
 
+import cv2
 import numpy as np
 
 from sepfm_ros.geometry import METHODS, Estimate, estimate_fundamental, symmetric_epipolar_distance
@@ -74,6 +76,8 @@ def config_errors(config: PipelineConfig) -> list[str]:
     errors = []
     if config.features not in FEATURES:
         errors.append(f"features must be one of {FEATURES}, got {config.features!r}")
+    elif not detector_available(config.features):
+        errors.append(f"features {config.features!r} are not available in this OpenCV build")
     if config.method not in METHODS:
         errors.append(f"method must be one of {METHODS}, got {config.method!r}")
     if not int(config.max_features) >= MIN_MATCHES:
@@ -91,12 +95,38 @@ def config_errors(config: PipelineConfig) -> list[str]:
     return errors
 
 
+@cache
+def detector_available(features: str) -> bool:
+    """True when this OpenCV build can create the ``features`` detector."""
+    try:
+        make_detector(features, 100)
+    except (AttributeError, cv2.error):
+        return False
+    return True
+
+
+def unique_matches(matches: Matches) -> Matches:
+    """Drop repeated correspondences (same pts_a and pts_b), keeping the first (best) of each.
+
+    SIFT can return one location several times (one per orientation); estimators reject
+    duplicate correspondences, and they carry no information.
+    """
+    if len(matches) < 2:
+        return matches
+    both = np.concatenate([matches.pts_a, matches.pts_b], axis=1)
+    _, first = np.unique(both, axis=0, return_index=True)
+    if len(first) == len(matches):
+        return matches
+    keep = np.sort(first)
+    return Matches(matches.pts_a[keep], matches.pts_b[keep], matches.ratio[keep])
+
+
 @dataclass
 class PipelineResult:
     """What the pipeline made of one image pair.
 
     Attributes:
-        matches: putative matches, best first (pts_a in image a, pts_b in image b).
+        matches: putative matches without duplicates, best first (pts_a in image a, pts_b in b).
         estimate: the estimator's result; ``estimate.F`` maps a to b (``x_b^T F x_a = 0``), or
             None with ``estimate.status`` saying why.
         errors: (N,) float64 symmetric epipolar distance (px) of every match under F; NaN when
@@ -201,6 +231,7 @@ class Pipeline:
 
         t0 = time.perf_counter()
         matches = match_descriptors(pts_a, desc_a, pts_b, desc_b, cfg.features, cfg.ratio)
+        matches = unique_matches(matches)
         if cfg.max_matches and len(matches) > cfg.max_matches:
             k = cfg.max_matches
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])

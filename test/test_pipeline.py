@@ -1,0 +1,125 @@
+"""Pipeline: images -> matches -> F on real pairs with GT, determinism, caching, bad config."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+from ground_truth import gt_fundamental, median_gt_inlier_error
+
+from sepfm_ros.pipeline.drawing import draw_result
+from sepfm_ros.pipeline.pipeline import MIN_MATCHES, Pipeline, PipelineConfig
+
+PAIRS = {
+    "kitti_stereo": ("kitti_seq2/left/000000.png", "kitti_seq2/right/000000.png"),
+    "kitti_motion": ("kitti_seq2/left/000010.png", "kitti_seq2/left/000011.png"),
+    "temple_motion": ("templeRing/templeR0001.png", "templeRing/templeR0002.png"),
+}
+
+
+def load(data, rel):
+    image = cv2.imread(str(data / rel), cv2.IMREAD_GRAYSCALE)
+    assert image is not None, rel
+    return image
+
+
+@pytest.mark.parametrize("features", ["orb", "sift"])
+@pytest.mark.parametrize("name", sorted(PAIRS))
+def test_real_pairs_meet_the_accuracy_criterion(shared_data, name, features):
+    img_a, img_b = PAIRS[name]
+    result = Pipeline(PipelineConfig(features=features, seed=3)).process(
+        load(shared_data, img_a), load(shared_data, img_b)
+    )
+    assert result.ok, result.estimate.status
+    m = result.matches
+    assert len(m) >= 50
+    assert np.all(np.diff(m.ratio) >= 0), "matches must be sorted best first"
+    err, n_gt = median_gt_inlier_error(
+        result.estimate.F, gt_fundamental(shared_data, img_a, img_b), m.pts_a, m.pts_b
+    )
+    assert n_gt >= 30
+    assert err < 1.0, f"{name}/{features}: median error of {n_gt} GT inliers {err:.3f} px"
+    assert np.isclose(np.linalg.norm(result.estimate.F), 1.0)
+    assert result.errors.shape == (len(m),) and np.all(np.isfinite(result.errors))
+    assert result.estimate.inliers.shape == (len(m),)
+    for stage in ("features", "match", "estimate", "total"):
+        assert result.timings_ms[stage] >= 0.0
+    assert (
+        result.size_a
+        == result.size_b
+        == (load(shared_data, img_a).shape[1],) + (load(shared_data, img_a).shape[0],)
+    )
+
+
+def test_same_seed_same_result_and_cache_changes_nothing(shared_data):
+    a, b = (load(shared_data, p) for p in PAIRS["temple_motion"])
+    config = PipelineConfig(seed=11)
+    first = Pipeline(config).process(a, b)
+    cached_pipeline = Pipeline(config)
+    cached_pipeline.process(a, b, key_a="a", key_b="b")
+    second = cached_pipeline.process(a, b, key_a="a", key_b="b")  # features from the cache
+    np.testing.assert_array_equal(first.estimate.F, second.estimate.F)
+    np.testing.assert_array_equal(first.estimate.inliers, second.estimate.inliers)
+    np.testing.assert_array_equal(first.matches.pts_a, second.matches.pts_a)
+
+
+def test_prior_timings_are_reported_and_counted(shared_data):
+    a, b = (load(shared_data, p) for p in PAIRS["temple_motion"])
+    result = Pipeline().process(a, b, prior_timings_ms={"decode": 5.0})
+    assert list(result.timings_ms)[0] == "decode" and result.timings_ms["decode"] == 5.0
+    assert result.timings_ms["total"] >= 5.0 + result.timings_ms["features"]
+
+
+def test_reconfigure_and_max_matches(shared_data):
+    a, b = (load(shared_data, p) for p in PAIRS["kitti_stereo"])
+    pipeline = Pipeline()
+    pipeline.process(a, b, key_a=1, key_b=2)
+    config = pipeline.update(max_matches=40, features="sift")
+    assert pipeline.config == config and config.features == "sift"
+    result = pipeline.process(a, b, key_a=1, key_b=2)  # cache was dropped with the detector
+    assert len(result.matches) == 40
+
+
+def test_textureless_images_fail_with_a_reason_not_an_exception():
+    blank = np.full((120, 160), 128, np.uint8)
+    result = Pipeline().process(blank, blank)
+    assert not result.ok and result.estimate.F is None
+    assert f"< {MIN_MATCHES}" in result.estimate.status
+    assert np.all(np.isnan(result.errors))
+
+
+@pytest.mark.parametrize(
+    ("change", "text"),
+    [
+        ({"features": "surf"}, "features"),
+        ({"method": "magic"}, "method"),
+        ({"max_features": 3}, "max_features"),
+        ({"ratio": 0.0}, "ratio"),
+        ({"threshold_px": -1.0}, "threshold_px"),
+        ({"confidence": 1.0}, "confidence"),
+        ({"seed": -2}, "seed"),
+    ],
+)
+def test_bad_config_is_rejected_with_the_reason(change, text):
+    with pytest.raises(ValueError, match=text):
+        PipelineConfig(**change)
+
+
+def test_draw_result_shape(shared_data):
+    a, b = (load(shared_data, p) for p in PAIRS["temple_motion"])
+    result = Pipeline().process(a, b)
+    canvas = draw_result(a, b, result, epipolar_lines=5)
+    assert canvas.shape == (a.shape[0], a.shape[1] + b.shape[1], 3) and canvas.dtype == np.uint8
+    # something was drawn over the grey images (coloured pixels exist)
+    assert np.any(canvas[..., 1].astype(int) - canvas[..., 0].astype(int) > 100)
+
+
+def test_duplicate_correspondences_are_removed_best_first():
+    from sepfm_ros.pipeline.features import Matches
+    from sepfm_ros.pipeline.pipeline import unique_matches
+
+    pts_a = np.array([[1.0, 2.0], [3.0, 4.0], [1.0, 2.0], [1.0, 2.0]])
+    pts_b = np.array([[5.0, 6.0], [7.0, 8.0], [5.0, 6.0], [5.0, 9.0]])
+    m = unique_matches(Matches(pts_a, pts_b, np.array([0.1, 0.2, 0.3, 0.4])))
+    np.testing.assert_array_equal(m.ratio, [0.1, 0.2, 0.4])
+    np.testing.assert_array_equal(m.pts_b, [[5.0, 6.0], [7.0, 8.0], [5.0, 9.0]])

@@ -94,10 +94,14 @@ def match_descriptors(
     ia, ib, rr = np.asarray(ia), np.asarray(ib), np.asarray(rr, dtype=np.float64)
     order = np.argsort(rr, kind="stable")
     ia, ib, rr = ia[order], ib[order], rr[order]
-    # keep the best match per point in image b (one-to-one on b's side)
+    # keep the best match per point in image b (one-to-one on b's side), then drop repeated
+    # correspondences (SIFT reports a keypoint once per dominant orientation)
     _, first = np.unique(ib, return_index=True)
     keep = np.sort(first)
-    return Matches(pts_a[ia[keep]], pts_b[ib[keep]], rr[keep])
+    pa, pb, rr = pts_a[ia[keep]], pts_b[ib[keep]], rr[keep]
+    _, first = np.unique(np.concatenate([pa, pb], axis=1), axis=0, return_index=True)
+    keep = np.sort(first)
+    return Matches(pa[keep], pb[keep], rr[keep])
 
 
 def match_images(

@@ -1,0 +1,160 @@
+"""estimate_fundamental on synthetic scenes with exact ground truth: all methods, bad input,
+degenerate data, the line-pair search and stage 1."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from sepfm_ros.geometry import METHODS, estimate_fundamental, normalize_fundamental
+from sepfm_ros.geometry.line_homography_fit import fit_line_homography
+from sepfm_ros.geometry.line_pairs import LineSearchOptions, find_line_pairs, working_scale
+from sepfm_ros.geometry.synthetic import make_pair
+
+
+def sign_free_error(F: np.ndarray, G: np.ndarray) -> float:
+    F, G = normalize_fundamental(F), normalize_fundamental(G)
+    return float(min(np.abs(F - G).max(), np.abs(F + G).max()))
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_noise_free_recovers_F_exactly(method):
+    sp = make_pair(n_inliers=120, n_outliers=0, n_lines=3, noise=0.0, seed=11)
+    est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method=method, seed=0)
+    assert est.F is not None and est.status == "ok"
+    assert sign_free_error(est.F, sp.F) < 1e-8
+    assert est.inliers.all()
+    assert est.hypotheses == est.stage1_hypotheses + est.stage2_hypotheses
+    if method.startswith("sep"):
+        assert est.line_pair is not None and not est.fallback
+        assert len(est.line_inliers) >= 4
+        assert est.stage1_hypotheses > 0
+    else:
+        assert est.stage1_hypotheses == 0 and est.line_pair is None
+
+
+@pytest.mark.parametrize("method", METHODS)
+def test_half_outliers_with_noise_recovers_true_inliers(method):
+    # 150 general + 2 x 12 line points = 174 true matches, 174 outliers (50 %), 0.5 px noise.
+    # Threshold 1.5 px: about 99 % of true matches lie within it under the true F.
+    sp = make_pair(n_inliers=150, n_outliers=174, n_lines=2, noise=0.5, seed=5)
+    est = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method=method, threshold=1.5, seed=1
+    )
+    assert est.F is not None
+    recovered = np.count_nonzero(est.inliers & sp.is_inlier) / np.count_nonzero(sp.is_inlier)
+    false = np.count_nonzero(est.inliers & ~sp.is_inlier)
+    assert recovered >= 0.95, f"{method} recovered {recovered:.3f}"
+    assert false <= 0.05 * np.count_nonzero(sp.is_inlier)
+
+
+def test_separable_uses_fewer_hypotheses_than_seven_point_ransac():
+    sp = make_pair(n_inliers=150, n_outliers=150, n_lines=3, noise=0.3, seed=8)
+    sep = [
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=s)
+        for s in range(5)
+    ]
+    r7 = [
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="ransac7", seed=s)
+        for s in range(5)
+    ]
+    assert all(e.line_pair is not None for e in sep)
+    assert np.median([e.hypotheses for e in sep]) < 0.5 * np.median([e.hypotheses for e in r7])
+
+
+def test_seed_makes_results_deterministic():
+    sp = make_pair(n_inliers=100, n_outliers=80, n_lines=2, noise=0.5, seed=2)
+    a = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, seed=42)
+    b = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, seed=42)
+    assert np.array_equal(a.F, b.F) and np.array_equal(a.inliers, b.inliers)
+    assert a.hypotheses == b.hypotheses
+
+
+@settings(max_examples=8, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(scene_seed=st.integers(0, 10_000), method=st.sampled_from(["sep5", "sep4", "ransac7"]))
+def test_swapping_images_transposes_F(scene_seed, method):
+    sp = make_pair(n_inliers=80, n_outliers=0, n_lines=2, noise=0.0, seed=scene_seed)
+    fwd = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method=method, seed=0)
+    bwd = estimate_fundamental(sp.pts2, sp.pts1, sp.image_size, method=method, seed=0)
+    assert sign_free_error(fwd.F, bwd.F.T) < 1e-7
+    assert sign_free_error(fwd.F, sp.F) < 1e-7
+
+
+def test_line_pair_search_finds_a_3d_line_and_stage1_keeps_its_points():
+    sp = make_pair(n_inliers=100, n_outliers=60, n_lines=2, points_per_line=15, noise=0.3, seed=4)
+    opts = LineSearchOptions()
+    pairs = find_line_pairs(sp.pts1, sp.pts2, sp.image_size, sp.image_size, opts)
+    assert pairs, "no line pair found"
+    s = working_scale(sp.image_size, opts.width)
+    rng = np.random.default_rng(0)
+    fits = [
+        fit_line_homography(p, sp.pts1, sp.pts2, sp.image_size, sp.image_size, s, s, rng)[0]
+        for p in pairs[:4]
+    ]
+    fits = [f for f in fits if f is not None]
+    assert fits
+    best = max(fits, key=lambda f: len(f.inliers))
+    # the H_e inliers of the best pair are true correspondences on one 3D line
+    assert len(best.inliers) >= 8
+    assert np.mean(sp.on_line[best.inliers]) >= 0.9
+    assert sp.is_inlier[best.inliers].all()
+
+
+@pytest.mark.parametrize(
+    "pts1,pts2,size,message",
+    [
+        (np.zeros((5, 2)), np.zeros((5, 2)), (640, 480), "at least"),
+        (np.zeros((10, 3)), np.zeros((10, 3)), (640, 480), "shape"),
+        (np.zeros((10, 2)), np.zeros((12, 2)), (640, 480), "same shape"),
+        (np.full((10, 2), np.nan), np.zeros((10, 2)), (640, 480), "NaN"),
+        (np.c_[np.arange(10.0), np.arange(10.0) ** 2], np.full((10, 2), np.inf), (640, 480), "inf"),
+        (np.ones((10, 2)), np.ones((10, 2)), (640, 480), "duplicate"),
+        (
+            np.random.default_rng(0).random((10, 2)),
+            np.random.default_rng(1).random((10, 2)),
+            None,
+            "image_size1",
+        ),
+        (
+            np.random.default_rng(0).random((10, 2)),
+            np.random.default_rng(1).random((10, 2)),
+            (0, 480),
+            "positive",
+        ),
+    ],
+)
+def test_bad_input_raises_clear_value_error(pts1, pts2, size, message):
+    with pytest.raises(ValueError, match=message):
+        estimate_fundamental(pts1, pts2, size)
+
+
+def test_bad_method_and_options():
+    sp = make_pair(n_inliers=30, seed=1)
+    with pytest.raises(ValueError, match="unknown method"):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="ransac9")
+    with pytest.raises(ValueError, match="unknown options"):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, hough_widht=100)
+    with pytest.raises(ValueError, match="threshold"):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, threshold=-1)
+
+
+@pytest.mark.parametrize("method", ["sep5", "ransac7"])
+def test_degenerate_data_gives_status_not_exception(method):
+    rng = np.random.default_rng(0)
+    # all points on one line
+    t = rng.uniform(0, 1, 40)
+    line1 = np.c_[100 + 400 * t, 50 + 300 * t]
+    line2 = np.c_[120 + 380 * t, 40 + 310 * t**1.1]
+    est = estimate_fundamental(line1, line2, (640, 480), method=method, seed=0)
+    assert est.F is None and "one line" in est.status
+    # no motion
+    p = rng.uniform(0, 600, (50, 2))
+    est = estimate_fundamental(p, p.copy(), (640, 480), method=method, seed=0)
+    assert est.F is None and "no motion" in est.status
+    # one plane: every match on one homography
+    H = np.array([[1.05, 0.02, 12.0], [-0.01, 0.98, 5.0], [1e-5, 2e-5, 1.0]])
+    q = np.c_[p, np.ones(len(p))] @ H.T
+    est = estimate_fundamental(p, q[:, :2] / q[:, 2:], (640, 480), method=method, seed=0)
+    assert est.status.startswith("degenerate") and "plane" in est.status

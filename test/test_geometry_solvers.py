@@ -1,0 +1,114 @@
+"""Minimal solvers, epipolar helpers and F(k, r) on exact synthetic data."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from sepfm_ros.geometry import (
+    fundamental_from_cameras,
+    normalize_fundamental,
+    ransac_trials,
+    sampson_distance,
+    symmetric_epipolar_distance,
+)
+from sepfm_ros.geometry.epipolar import apply_transform, denormalize, normalization_transform
+from sepfm_ros.geometry.solvers import eight_point, line_homography_3pt, seven_point
+from sepfm_ros.geometry.solvers.line_homography import line_homography_lsq, transfer
+from sepfm_ros.geometry.synthetic import make_pair
+
+
+def _sign_free_error(F: np.ndarray, G: np.ndarray) -> float:
+    F, G = normalize_fundamental(F), normalize_fundamental(G)
+    return float(min(np.abs(F - G).max(), np.abs(F + G).max()))
+
+
+@pytest.fixture(scope="module")
+def scene():
+    return make_pair(n_inliers=60, n_outliers=0, n_lines=0, noise=0.0, seed=3)
+
+
+def test_fundamental_from_cameras_satisfies_epipolar_constraint(scene):
+    x1 = np.c_[scene.pts1, np.ones(len(scene.pts1))]
+    x2 = np.c_[scene.pts2, np.ones(len(scene.pts2))]
+    r = np.einsum("ni,ij,nj->n", x2, scene.F, x1)
+    assert np.abs(r).max() < 1e-9
+    assert np.isclose(np.linalg.norm(scene.F), 1.0)
+    assert np.linalg.matrix_rank(scene.F, tol=1e-9) == 2
+    # independent of the cameras' projective scale
+    assert _sign_free_error(fundamental_from_cameras(3 * scene.P1, -scene.P2), scene.F) < 1e-10
+
+
+def test_seven_point_recovers_exact_F(scene):
+    T1, T2 = normalization_transform(scene.pts1), normalization_transform(scene.pts2)
+    x1, x2 = apply_transform(T1, scene.pts1), apply_transform(T2, scene.pts2)
+    idx = np.arange(7 * 5).reshape(5, 7)
+    F_n, sample = seven_point(x1[idx], x2[idx])
+    assert len(F_n) >= 5 and set(sample) == set(range(5))
+    F = denormalize(F_n, T1, T2)
+    for s in range(5):
+        errs = [_sign_free_error(G, scene.F) for G in F[sample == s]]
+        assert min(errs) < 1e-8
+        # every root is a rank-2 matrix through the 7 points
+        for G in F[sample == s]:
+            assert abs(np.linalg.det(G / np.linalg.norm(G))) < 1e-9
+
+
+def test_eight_point_recovers_exact_F(scene):
+    T1, T2 = normalization_transform(scene.pts1), normalization_transform(scene.pts2)
+    x1, x2 = apply_transform(T1, scene.pts1), apply_transform(T2, scene.pts2)
+    idx = np.arange(8 * 4).reshape(4, 8)
+    F = denormalize(eight_point(x1[idx], x2[idx]), T1, T2)
+    for G in F:
+        assert _sign_free_error(G, scene.F) < 1e-8
+    G = denormalize(eight_point(x1, x2), T1, T2)  # least squares on all
+    assert _sign_free_error(G, scene.F) < 1e-8
+
+
+def test_line_homography_minimal_and_least_squares():
+    rng = np.random.default_rng(0)
+    H = rng.normal(size=(2, 2))
+    t1 = rng.uniform(0, 1, 10)
+    t2 = transfer(H, t1)
+    ab1 = np.stack([1 - t1, t1], -1)
+    ab2 = np.stack([1 - t2, t2], -1)
+    Hs = line_homography_3pt(ab1[None, :3], ab2[None, :3])[0]
+    assert np.allclose(transfer(Hs, t1), t2, atol=1e-9)
+    Hl = line_homography_lsq(ab1, ab2)
+    assert np.allclose(transfer(Hl, t1), t2, atol=1e-9)
+    # a wrong correspondence is not reproduced
+    assert abs(transfer(Hs, np.array([0.5]))[0] - (transfer(H, np.array([0.5]))[0] + 0.1)) > 0.05
+
+
+def test_symmetric_epipolar_and_sampson_distance_hand_computed():
+    # F = [t]_x for t = (1, 0, 0): pure x translation; epipolar lines are rows v = const.
+    F = np.array([[0.0, 0.0, 0.0], [0.0, 0.0, -1.0], [0.0, 1.0, 0.0]])
+    p1 = np.array([[10.0, 20.0], [5.0, 5.0]])
+    p2 = np.array([[30.0, 23.0], [9.0, 5.0]])
+    # x2^T F x1 = v1 - v2 ... line in image 2 through v = v1: distance |v2 - v1|
+    d = symmetric_epipolar_distance(F, p1, p2)
+    assert np.allclose(d, [3.0, 0.0])
+    s = sampson_distance(F, p1, p2)
+    assert np.allclose(s, [3.0 / np.sqrt(2.0), 0.0])
+    # batched form agrees
+    assert np.allclose(symmetric_epipolar_distance(np.stack([F, 2 * F]), p1, p2), [d, d])
+
+
+@pytest.mark.parametrize("k,r", [(7, 0.5), (3, 0.6), (4, 0.6), (8, 0.3), (1, 0.0)])
+def test_ransac_trials_formula(k, r):
+    expected = math.ceil(math.log(1 - 0.99) / math.log(1 - (1 - r) ** k)) if r > 0 else 1
+    assert ransac_trials(k, r, 0.99) == max(1, expected)
+
+
+def test_ransac_trials_paper_values():
+    # the paper quotes 71 for F(3, 0.6) (log(0.01) / log(1 - 0.4^3) = 69.6, rounded up: 70)
+    # and 178 for F(4, 0.6) at 99 % confidence
+    assert ransac_trials(3, 0.6) == 70
+    assert ransac_trials(4, 0.6) == 178
+    assert ransac_trials(7, 0.9, max_trials=1000) == 1000
+    with pytest.raises(ValueError):
+        ransac_trials(0, 0.5)
+    with pytest.raises(ValueError):
+        ransac_trials(7, 1.0)

@@ -18,7 +18,7 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairSpec
-from sepfm_ros.pipeline.features import FEATURES, match_images
+from sepfm_ros.pipeline.features import FEATURES, make_detector, match_images
 
 #: Bumped when the cached content or its meaning changes.
 CACHE_VERSION = 1
@@ -47,6 +47,13 @@ class MatchSettings:
             raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
         if self.max_features < 0:
             raise ValueError(f"max_features must be >= 0, got {self.max_features}")
+        try:
+            make_detector(self.features, self.detector_cap())
+        except (AttributeError, cv2.error) as exc:
+            raise ValueError(
+                f"features {self.features!r} are not available in this OpenCV build "
+                f"({cv2.__version__}): {exc}"
+            ) from None
 
     def detector_cap(self) -> int:
         """The ``max_features`` passed to match_images."""

@@ -18,7 +18,8 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairSpec
-from sepfm_ros.pipeline.features import FEATURES, make_detector, match_images
+from sepfm_ros.pipeline.features import FEATURES, Matches, match_images
+from sepfm_ros.pipeline.pipeline import detector_available, unique_matches
 
 #: Bumped when the cached content or its meaning changes.
 CACHE_VERSION = 1
@@ -47,13 +48,11 @@ class MatchSettings:
             raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
         if self.max_features < 0:
             raise ValueError(f"max_features must be >= 0, got {self.max_features}")
-        try:
-            make_detector(self.features, self.detector_cap())
-        except (AttributeError, cv2.error) as exc:
+        if not detector_available(self.features):
             raise ValueError(
                 f"features {self.features!r} are not available in this OpenCV build "
-                f"({cv2.__version__}): {exc}"
-            ) from None
+                f"({cv2.__version__})"
+            )
 
     def detector_cap(self) -> int:
         """The ``max_features`` passed to match_images."""
@@ -71,18 +70,6 @@ class PairMatches:
     size_a: tuple[int, int]
     size_b: tuple[int, int]
     from_cache: bool = False
-
-
-def unique_matches(pts_a: np.ndarray, pts_b: np.ndarray) -> np.ndarray:
-    """Indices (ascending) of the first occurrence of each distinct correspondence.
-
-    SIFT reports a keypoint once per dominant orientation, so the same (x_a, x_b) can appear more
-    than once; the estimators reject exact duplicates, and they would double-count in metrics.
-    Input order (best match first) is kept.
-    """
-    rows = np.concatenate([pts_a, pts_b], axis=1)
-    _, first = np.unique(rows, axis=0, return_index=True)
-    return np.sort(first)
 
 
 def file_hash(path: Path) -> str:
@@ -125,11 +112,14 @@ class MatchesCache:
             self.folder.mkdir(parents=True, exist_ok=True)
 
     def matches(self, pair: PairSpec) -> PairMatches:
-        """Distinct matches of ``pair``, best first (points entries as given, not cached)."""
+        """Distinct matches of ``pair``, best first (points entries as given, not cached).
+
+        Repeated correspondences are dropped (``pipeline.unique_matches``): SIFT reports a
+        location once per orientation, and the estimators reject duplicates.
+        """
         pm = self._raw_matches(pair)
-        keep = unique_matches(pm.pts_a, pm.pts_b)
-        if len(keep) < pm.pts_a.shape[0]:
-            pm.pts_a, pm.pts_b = pm.pts_a[keep], pm.pts_b[keep]
+        m = unique_matches(Matches(pm.pts_a, pm.pts_b, np.zeros(len(pm.pts_a))))
+        pm.pts_a, pm.pts_b = m.pts_a, m.pts_b
         return pm
 
     def _raw_matches(self, pair: PairSpec) -> PairMatches:

@@ -208,44 +208,42 @@ def estimate_fundamental(
         est.timings_ms["lines"] = 1e3 * (t1 - t0)
         s1 = working_scale(size1, lopts.width)
         s2 = working_scale(size2, lopts.width)
+        k_stage2 = (7 if solver == "seven" else 8) - 3
         fits: list[LineHomographyFit] = []
-        for pair in pairs:
-            fit, h = fit_line_homography(
-                pair,
-                p1,
-                p2,
-                size1,
-                size2,
-                s1,
-                s2,
-                rng,
-                threshold=float(opt["line_threshold"]),
-                confidence=confidence,
-                min_inliers=int(opt["min_line_inliers"]),
-            )
-            est.stage1_hypotheses += h
-            if fit is not None:
-                fits.append(fit)
-            if len(fits) >= int(opt["max_line_pairs"]):
-                break
-        t2 = time.perf_counter()
-        est.timings_ms["stage1"] = 1e3 * (t2 - t1)
-        if fits:
-            arms = []
-            for fit in fits:
-                f1, f2 = _triples(fit, p1, p2, opt["triple"])
-                pool = np.setdiff1d(np.arange(n), fit.pair.support)
-                if len(pool) < (7 if solver == "seven" else 8) - 3:
+        stage1_s = [0.0]
+
+        def stage2_arms():
+            """Stage 1 on the next line pair, run only when its stage-2 arm joins the race."""
+            for pair in pairs:
+                if len(fits) >= int(opt["max_line_pairs"]):
+                    return
+                t = time.perf_counter()
+                fit, h = fit_line_homography(
+                    pair, p1, p2, size1, size2, s1, s2, rng,
+                    threshold=float(opt["line_threshold"]), confidence=confidence,
+                    min_inliers=int(opt["min_line_inliers"]),
+                )  # fmt: skip
+                est.stage1_hypotheses += h
+                stage1_s[0] += time.perf_counter() - t
+                if fit is None:
                     continue
-                arms.append(FundamentalProblem(data, solver, threshold, scoring, f1, f2, pool))
-            if arms:
-                result = run_ransac(arms, rng, confidence, max_samples, race=RaceOptions())
-                est.stage2_hypotheses += result.hypotheses
-                if result.leader >= 0:
-                    best = fits[result.leader]
-                    est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
-                    est.line_inliers = best.inliers
-        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
+                pool = np.setdiff1d(np.arange(n), pair.support)
+                if len(pool) < k_stage2:
+                    continue
+                f1, f2 = _triples(fit, p1, p2, opt["triple"])
+                fits.append(fit)
+                yield FundamentalProblem(data, solver, threshold, scoring, f1, f2, pool)
+
+        result = run_ransac(stage2_arms(), rng, confidence, max_samples, race=RaceOptions())
+        est.stage2_hypotheses += result.hypotheses
+        if fits and result.leader >= 0:
+            best = fits[result.leader]
+            est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
+            est.line_inliers = best.inliers
+        est.timings_ms["stage1"] = 1e3 * stage1_s[0]
+        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t1 - stage1_s[0])
+        if not fits:
+            result = None
         if result is None or not result.converged:
             # no usable line pair, or stage 2 hit its cap (a wrong fixed triple is the usual
             # cause): standard RANSAC, starting from the best model so far
@@ -300,15 +298,16 @@ def _final_model(
         return float(np.minimum(d * d, threshold * threshold).sum())
 
     best, best_cost = normalize_fundamental(F), cost(F)
-    for _ in range(3):
-        inl = symmetric_epipolar_distance(best, p1, p2) < threshold
+    # inlier sets from a shrinking threshold (as in LO-RANSAC's iterative step) let the refit
+    # escape a model that sits slightly off the true one; a refit is kept only if it is better
+    for factor in (3.0, 2.0, 1.5, 1.0, 1.0, 1.0):
+        inl = symmetric_epipolar_distance(best, p1, p2) < factor * threshold
         if np.count_nonzero(inl) < 8:
-            break
+            continue
         G = fit_least_squares(p1[inl], p2[inl])
         if refine:
             G = refine_sampson(G, p1[inl], p2[inl])
         c = cost(G)
-        if c >= best_cost:
-            break
-        best, best_cost = normalize_fundamental(G), c
+        if c < best_cost:
+            best, best_cost = normalize_fundamental(G), c
     return best

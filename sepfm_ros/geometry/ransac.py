@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
@@ -123,7 +124,7 @@ def _trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> i
 
 
 def run_ransac(
-    arms: list[Problem],
+    arms: Iterable[Problem],
     rng: np.random.Generator,
     confidence: float = 0.99,
     max_samples: int = 10000,
@@ -134,40 +135,56 @@ def run_ransac(
 ) -> RansacResult:
     """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
 
-    Arm 0 starts; further arms join on the ``race`` schedule and are dropped when their support
-    lags (see :class:`RaceOptions`). The loop stops when the leading arm (the one holding the
-    best model) has drawn F(k, r) samples for the inlier ratio of the best model, or when
-    ``max_samples`` samples were drawn in all.
+    Arm 0 starts; further arms are pulled from ``arms`` (lazily: an iterator may build each arm
+    only when it joins) on the ``race`` schedule and are dropped when their support lags (see
+    :class:`RaceOptions`). The loop stops when the leading arm (the one holding the best model)
+    has drawn F(k, r) samples for the inlier ratio of the best model, or when ``max_samples``
+    samples were drawn in all.
 
     Args:
-        arms: problems to sample; all score against the same data.
+        arms: problems to sample (a list or a lazy iterator); all score against the same data.
         rng: the random generator (seeded by the caller).
         confidence: RANSAC confidence p.
         max_samples: cap on the total number of samples over all arms.
         min_samples: samples the leading arm draws at least before stopping.
         race: racing options (only used with more than one arm).
         batch: most samples one arm solves and scores in one vectorised call.
-        initial: optional (model, cost, count) from an earlier run to start from.
+        initial: optional (model, cost, count) from an earlier run to start from; it counts as
+            arm 0's model.
     """
     race = race or RaceOptions()
-    n_arms = len(arms)
-    samples = [0] * n_arms
-    arm_best = [-1] * n_arms  # best inlier count per arm
-    active = [0]
-    joined = 1
+    source = iter(arms)
+    pool: list[Problem] = []
+    samples: list[int] = []
+    arm_best: list[int] = []  # best inlier count per arm
+    active: list[int] = []
     dropped: list[int] = []
+
+    def join() -> bool:
+        arm = next(source, None)
+        if arm is None:
+            return False
+        pool.append(arm)
+        samples.append(0)
+        arm_best.append(-1)
+        active.append(len(pool) - 1)
+        return True
+
+    join()
     best_model, best_cost, best_count, leader = None, np.inf, -1, -1
-    if initial is not None:
+    if initial is not None and pool:
         best_model, best_cost, best_count = initial
+        leader = 0
     hypotheses = 0
     total = 0
+    n_join = 0
     next_join = race.add_after[0] if race.add_after else max_samples
     converged = False
 
     while active:
         # one round: every active arm draws a batch sized by what it still needs
         for a in list(active):
-            arm = arms[a]
+            arm = pool[a]
             need = _trials_needed(
                 arm.sample_size, max(best_count, 0), arm.n, confidence, max_samples
             )
@@ -205,7 +222,7 @@ def run_ransac(
                 arm_best[a] = max(arm_best[a], best_count)
         # adaptive stopping on the leading arm
         if leader >= 0:
-            arm = arms[leader]
+            arm = pool[leader]
             need = _trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
             if samples[leader] >= max(need, min_samples):
                 converged = True
@@ -213,29 +230,25 @@ def run_ransac(
         if total >= max_samples:
             break
         # racing: drop lagging arms, let the next arm join on schedule
-        if n_arms > 1 and best_count > 0:
+        if len(pool) > 1 and best_count > 0:
             for a in list(active):
                 if a == leader or arm_best[a] >= race.drop_ratio * best_count:
                     continue
-                w = min(1.0, best_count / arms[a].n)
-                enough = np.log(race.drop_alpha) / np.log(
-                    max(1e-300, 1.0 - w ** arms[a].sample_size)
-                )
-                if samples[a] >= enough:
+                w = min(1.0, best_count / pool[a].n)
+                p_good = w ** pool[a].sample_size
+                if samples[a] >= np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)):
                     active.remove(a)
                     dropped.append(a)
-        if joined < n_arms and total >= next_join:
-            active.append(joined)
-            joined += 1
-            idx = joined - 1
-            next_join = (
-                race.add_after[idx]
-                if idx < len(race.add_after)
-                else int(np.ceil(next_join * race.add_growth))
-            )
-        if not active and joined < n_arms:
-            active.append(joined)
-            joined += 1
+        if total >= next_join or not active:
+            if join():
+                n_join += 1
+                next_join = (
+                    race.add_after[n_join]
+                    if n_join < len(race.add_after)
+                    else int(np.ceil(next_join * race.add_growth))
+                )
+            else:
+                next_join = max_samples + 1
     return RansacResult(
         model=best_model,
         cost=best_cost,

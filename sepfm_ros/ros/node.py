@@ -113,6 +113,11 @@ PARAMS: dict[str, ParamSpec] = {
     "seed": ParamSpec(
         0, "seed of the estimator's random choices (same for every pair)", 0, 2**31 - 1
     ),
+    "publish_unreliable": ParamSpec(
+        True,
+        "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
+        " plane); ~/estimate_info then carries the reason at WARN level",
+    ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
     "diagnostics_period_s": ParamSpec(
         1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
@@ -136,7 +141,9 @@ def _descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
     desc = ParameterDescriptor(
         name=name, description=spec.description + extra, read_only=spec.read_only
     )
-    if isinstance(spec.default, bool) or isinstance(spec.default, str):
+    if isinstance(spec.default, bool):
+        desc.type = ParameterType.PARAMETER_BOOL
+    elif isinstance(spec.default, str):
         desc.type = ParameterType.PARAMETER_STRING
     elif isinstance(spec.default, int):
         desc.type = ParameterType.PARAMETER_INTEGER
@@ -162,6 +169,8 @@ def parameter_error(name: str, value: Any) -> str | None:
         if value not in spec.choices:
             return f"{name} must be one of {', '.join(spec.choices)}; got {value!r}"
         return None
+    if isinstance(spec.default, bool):
+        return None if isinstance(value, bool) else f"{name} must be true or false; got {value!r}"
     if isinstance(value, bool) or not isinstance(value, int | float):
         return f"{name} must be a number; got {value!r}"
     if not spec.low <= value <= spec.high:
@@ -215,6 +224,7 @@ class SepfmNode(Node):
         self._pending_config: PipelineConfig | None = None
         self._pipeline = Pipeline(pipeline_config(values), cache_size=8)
         self._epipolar_lines = int(values["debug_epipolar_lines"])
+        self._publish_unreliable = bool(values["publish_unreliable"])
         self._sync: ApproximateTimeSync[tuple[Any, float]] = ApproximateTimeSync(
             int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"])
         )
@@ -315,6 +325,7 @@ class SepfmNode(Node):
         with self._lock:
             self._pending_config = config
             self._epipolar_lines = int(values["debug_epipolar_lines"])
+            self._publish_unreliable = bool(values["publish_unreliable"])
             self._sync.configure(
                 int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"])
             )
@@ -440,7 +451,10 @@ class SepfmNode(Node):
         )
         t0 = time.perf_counter()
         header = job.header
-        if result.ok:
+        with self._lock:
+            publish_unreliable = self._publish_unreliable
+        published = result.estimate.F is not None and (result.ok or publish_unreliable)
+        if published:
             self._pub_f.publish(fundamental_to_image(result.estimate.F, header))
         self._pub_matches.publish(result_to_pointcloud2(result, header))
         publish_ms = (time.perf_counter() - t0) * 1e3
@@ -465,9 +479,9 @@ class SepfmNode(Node):
             self._latency_ms.append(latency_ms)
             self._wait_ms.append(wait_ms)
             self._max_wait_ms = max(self._max_wait_ms, wait_ms)
-            if result.ok:
+            if published:
                 self._published += 1
-            else:
+            if not result.ok:
                 self._failed += 1
 
     # ---------------------------------------------------------------- health
@@ -484,7 +498,7 @@ class SepfmNode(Node):
                 values[f"received_{topic}"] = self._received[topic]
             values["output_rate_hz"] = (self._published - published_last) / dt
             values["published"] = self._published
-            values["estimation_failed"] = self._failed
+            values["estimation_not_ok"] = self._failed
             values["synchronized_pairs"] = self._pairs
             values["dropped_pairs"] = self._dropped
             if self._mode == "stereo":
@@ -529,7 +543,12 @@ def _usage() -> str:
         "parameters:",
     ]
     for name, spec in PARAMS.items():
-        rng = f" one of {'/'.join(spec.choices)}" if spec.choices else f" [{spec.low}, {spec.high}]"
+        if spec.choices:
+            rng = f" one of {'/'.join(spec.choices)}"
+        elif isinstance(spec.default, bool):
+            rng = " true/false"
+        else:
+            rng = f" [{spec.low}, {spec.high}]"
         ro = " (read-only)" if spec.read_only else ""
         lines.append(f"  {name} = {spec.default!r}{rng}{ro}: {spec.description}")
     return "\n".join(lines)

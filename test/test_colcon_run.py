@@ -1,0 +1,134 @@
+"""The ``ros2 run sepfm_ros node`` contract, without ros2cli (not on PyPI).
+
+``colcon build`` (colcon-core + colcon-ros from PyPI) builds the package into a temporary
+workspace; the package prefix is looked up with ament_index_python exactly as ``ros2 run`` does,
+and ``<prefix>/lib/sepfm_ros/node`` is run from there (with the installed config file) until it
+publishes its /diagnostics report.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import sysconfig
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+rclpy = pytest.importorskip("rclpy")
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def colcon_install(tmp_path_factory) -> Path:
+    colcon = Path(sys.executable).parent / "colcon"
+    if not colcon.exists():
+        colcon = shutil.which("colcon")
+    assert colcon, "colcon not installed (pip install -e '.[test]' brings colcon-core, colcon-ros)"
+    ws = tmp_path_factory.mktemp("colcon_ws")
+    cmd = [str(colcon), "--log-base", str(ws / "log"), "build", "--base-paths", str(REPO)]
+    cmd += ["--build-base", str(ws / "build"), "--install-base", str(ws / "install")]
+    done = subprocess.run(cmd, cwd=ws, capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stdout + done.stderr
+    assert "Finished <<< sepfm_ros" in done.stdout, done.stdout
+    return ws / "install"
+
+
+def installed_env(install: Path) -> dict[str, str]:
+    """What sourcing install/setup.sh sets for this package: AMENT_PREFIX_PATH and PYTHONPATH."""
+    prefix = install / "sepfm_ros"
+    purelib = Path(sysconfig.get_path("purelib", vars={"base": str(prefix)}))
+    rel = purelib.relative_to(prefix)
+    site = prefix / rel
+    assert (site / "sepfm_ros" / "ros" / "node.py").is_file(), f"package not installed in {site}"
+    env = dict(os.environ)
+    env["AMENT_PREFIX_PATH"] = os.pathsep.join(
+        [str(prefix), *filter(None, [os.environ.get("AMENT_PREFIX_PATH")])]
+    )
+    env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
+    env["PYTHONUNBUFFERED"] = "1"
+    return env
+
+
+def test_colcon_build_installs_executables_and_share_files(colcon_install):
+    prefix = colcon_install / "sepfm_ros"
+    for name in ("node", "make_bag", "replay", "record", "process", "eval"):
+        assert os.access(prefix / "lib" / "sepfm_ros" / name, os.X_OK), name
+    share = prefix / "share" / "sepfm_ros"
+    assert (share / "package.xml").is_file()
+    assert (share / "config" / "sepfm.yaml").is_file()
+    assert (share / "launch" / "sepfm_launch.py").is_file()
+    assert (colcon_install.parent / "install").is_dir()
+    index = prefix / "share" / "ament_index" / "resource_index" / "packages" / "sepfm_ros"
+    assert index.is_file()
+
+
+def test_ros2_run_node_from_the_ament_prefix_publishes(colcon_install, ros_domain_id, tmp_path):
+    env = installed_env(colcon_install)
+    # look the package up the way `ros2 run` does (ament_index_python), in the installed env
+    lookup = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            "from ament_index_python.packages import get_package_prefix, "
+            "get_package_share_directory as share; import sepfm_ros; "
+            "print(get_package_prefix('sepfm_ros')); print(share('sepfm_ros')); "
+            "print(sepfm_ros.__file__)",
+        ],
+        env=env,
+        cwd=tmp_path,  # not the source tree, which would shadow the installed copy
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert lookup.returncode == 0, lookup.stderr
+    prefix, share, module_file = lookup.stdout.split()
+    assert Path(prefix) == colcon_install / "sepfm_ros"
+    assert Path(module_file).is_relative_to(colcon_install), module_file  # the installed copy
+    executable = Path(prefix) / "lib" / "sepfm_ros" / "node"
+
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    name = "sepfm_colcon"
+    seen = threading.Event()
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("sepfm_colcon_test", context=context)
+
+    def on_diag(msg):
+        if any(s.name == f"{name}: node" for s in msg.status):
+            seen.set()
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    log = tmp_path / "node.log"
+    with open(log, "w") as out:
+        proc = subprocess.Popen(
+            [str(executable), "--ros-args", "-r", f"__node:={name}"]
+            + ["--params-file", str(Path(share) / "config" / "sepfm.yaml")],
+            env=env,
+            cwd=tmp_path,
+            stdout=out,
+            stderr=subprocess.STDOUT,
+        )
+        try:
+            deadline = time.monotonic() + 30.0
+            while not seen.is_set() and time.monotonic() < deadline and proc.poll() is None:
+                executor.spin_once(timeout_sec=0.1)
+        finally:
+            proc.send_signal(signal.SIGINT)
+            code = proc.wait(15)
+            executor.shutdown()
+            node.destroy_node()
+            rclpy.try_shutdown(context=context)
+    output = log.read_text()
+    assert seen.is_set(), f"no /diagnostics from {executable}:\n{output}"
+    assert code == 0, output

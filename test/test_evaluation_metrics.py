@@ -131,15 +131,21 @@ def test_paired_comparison_counts_and_direction():
     assert (lower.wins, lower.losses) == (1, 2)
 
 
-def test_line_transfer_error_by_hand():
-    # epipolar line of x_a = (10, 7) in image b is v = 7; line_b is u = 20 -> meets at (20, 7)
-    line_b = np.array([1.0, 0.0, -20.0])
-    pts_a = np.array([[10.0, 7.0], [10.0, 7.0]])
-    pts_b = np.array([[20.0, 7.3], [21.0, 7.0]])
-    e = metrics.line_transfer_error(F_RECT, line_b, pts_a, pts_b)
-    assert e == pytest.approx([0.3, 1.0])
+def test_line_homography_error_by_hand():
+    # line_a: u = 10, line_b: u = 20; rectified F: epipolar lines are rows
+    line_a, line_b = np.array([1.0, 0.0, -10.0]), np.array([1.0, 0.0, -20.0])
+    pts_a = np.array([[10.4, 7.0], [10.0, 7.0], [9.0, 2.0]])
+    pts_b = np.array([[20.2, 7.3], [21.0, 8.0], [20.0, 2.0]])
+    # projections (10, 7) / (20, 7.3): row 7 meets u = 20 at (20, 7) -> 0.3; row 7.3 meets
+    # u = 10 at (10, 7.3) -> 0.3; mean 0.3. Second: 1.0 both ways. Third: exact.
+    e = metrics.line_homography_error(F_RECT, line_a, line_b, pts_a, pts_b)
+    assert e == pytest.approx([0.3, 1.0, 0.0])
     # a line parallel to the epipolar lines has no intersection
-    assert np.isinf(metrics.line_transfer_error(F_RECT, [0.0, 1.0, -7.0], pts_a, pts_b)).all()
+    row = np.array([0.0, 1.0, -7.0])
+    assert np.isinf(metrics.line_homography_error(F_RECT, row, row, pts_a, pts_b)).all()
+    # projection onto a line of a non-unit normal
+    proj = metrics.project_to_line(np.array([0.0, 2.0, -4.0]), np.array([[3.0, 5.0]]))
+    assert proj.ravel() == pytest.approx([3.0, 2.0])
 
 
 @pytest.mark.parametrize(

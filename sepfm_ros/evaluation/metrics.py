@@ -33,8 +33,8 @@ Definitions (all distances in pixels of the stored images, ``x_b^T F x_a = 0``):
   test p-value, and the mean difference with a seeded paired-bootstrap interval. A table difference
   whose win-fraction interval contains 0.5 is not distinguishable from noise on this data.
 - **Line homography error** (the paper's Fig. 8): for a match (x_a, x_b) on the line pair
-  (l_a, l_b), the distance from x_b to the point where the epipolar line F x_a meets l_b, i.e. the
-  transfer error of the epipolar homography H_e induced by F between the two lines.
+  (l_a, l_b), projected onto the lines, the symmetric transfer error along the lines of the
+  epipolar homography H_e that F induces (:func:`line_homography_error`).
 """
 
 from __future__ import annotations
@@ -296,23 +296,38 @@ def paired_comparison(
     )
 
 
-def line_transfer_error(
-    F: np.ndarray, line_b: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray
-) -> np.ndarray:
-    """(M,) px: distance from x_b to the intersection of the epipolar line F x_a with line_b.
+def project_to_line(line: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(M, 2) orthogonal projections of pts (M, 2) onto the line (a, b, c): a u + b v + c = 0."""
+    a, b, c = (float(v) for v in line)
+    k = (pts @ np.array([a, b]) + c) / (a * a + b * b)
+    return pts - k[:, None] * np.array([a, b])
 
-    For matches on a line pair this is the transfer error of the epipolar homography H_e that F
-    induces between the two lines (the paper's line homography error, Fig. 8). line_b: (3,) line
-    ``a u + b v + c = 0`` in image b; pts_a, pts_b: (M, 2). Inf where the epipolar line is
-    parallel to line_b.
-    """
-    x_a = np.concatenate([pts_a, np.ones((pts_a.shape[0], 1))], axis=1)
-    epi = x_a @ np.asarray(F, dtype=np.float64).T  # (M, 3) lines in image b
-    p = np.cross(epi, np.asarray(line_b, dtype=np.float64)[None, :])
+
+def _transfer(F: np.ndarray, line_to: np.ndarray, src: np.ndarray, dst: np.ndarray) -> np.ndarray:
+    """|dst - (line_to x F src)| in px for src/dst (M, 2); inf where the lines are parallel."""
+    x = np.concatenate([src, np.ones((src.shape[0], 1))], axis=1)
+    p = np.cross(x @ F.T, np.asarray(line_to, dtype=np.float64)[None, :])
     with np.errstate(divide="ignore", invalid="ignore"):
         uv = p[:, :2] / p[:, 2:3]
-        d = np.hypot(uv[:, 0] - pts_b[:, 0], uv[:, 1] - pts_b[:, 1])
+        d = np.hypot(uv[:, 0] - dst[:, 0], uv[:, 1] - dst[:, 1])
     return np.where(np.isfinite(d), d, np.inf)
+
+
+def line_homography_error(
+    F: np.ndarray, line_a: np.ndarray, line_b: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray
+) -> np.ndarray:
+    """(M,) px: symmetric transfer error, along the line pair, of the H_e that F induces.
+
+    The matches (pts_a, pts_b: (M, 2)) are first projected onto line_a / line_b (3,) (lines
+    ``a u + b v + c = 0``), as the estimator parametrises them along the lines. Forward: distance
+    from x_b' to the point where the epipolar line F x_a' meets line_b; backward: from x_a' to
+    where F^T x_b' meets line_a; the error is their mean (the paper's line homography error,
+    Fig. 8, in pixels of the stored images). Inf where an epipolar line is parallel to its line.
+    """
+    F = np.asarray(F, dtype=np.float64)
+    pa = project_to_line(line_a, np.asarray(pts_a, dtype=np.float64))
+    pb = project_to_line(line_b, np.asarray(pts_b, dtype=np.float64))
+    return 0.5 * (_transfer(F, line_b, pa, pb) + _transfer(F.T, line_a, pb, pa))
 
 
 def outlier_rate(n_positives: int, n_matches: int) -> float:

@@ -6,7 +6,8 @@ Figures (matplotlib, Agg backend, no display needed):
   rate for 7-point, 5-point, ours with 7-point (F(3,r)+F(4,r)) and ours with 8-point
   (F(3,r)+F(5,r)), next to the measured hypotheses per pair against the pair's GT outlier rate.
 - ``fig7_line_inliers.png``: inliers per matched line pair (histogram, the paper's Fig. 7).
-- ``fig8_line_homography_cdf.png``: CDF of the line homography (transfer) error (Fig. 8).
+- ``fig8_line_homography_cdf.png``: CDF per scene of the line homography error (Fig. 8) of the
+  line inliers, under the H_e that the estimated and the GT F induce on the line pair.
 - ``error_cdf.png``: CDF of the per-run mean symmetric epipolar error of the positives, per method.
 - ``example_<scene>.png``: one pair per scene with the line pair, inliers and epipolar lines.
 """
@@ -206,31 +207,37 @@ def fig7_line_inliers(res: EvalResults, path: Path) -> None:
     plt.close(fig)
 
 
-def _cdf(ax, values, label, xmax=None):
+def _cdf(ax, values, label, **style):
     v = np.sort(np.asarray(values, dtype=np.float64))
     if v.size == 0:
         return
     y = np.arange(1, v.size + 1) / v.size
-    ax.step(v, y, where="post", label=label)
+    ax.step(v, y, where="post", label=label, **style)
 
 
 def fig8_line_homography_cdf(res: EvalResults, path: Path) -> None:
+    """CDF per scene of the line homography error of the line inliers, H_e induced by the
+    estimated F (solid) and by the GT F (dashed)."""
     plt = _plt()
-    fig, ax = plt.subplots(figsize=(5.5, 3.8))
-    if res.line_errors_est or res.line_errors_gt:
-        for vals, label in (
-            (res.line_errors_est, "H_e from the estimated F"),
-            (res.line_errors_gt, "H_e from the GT F"),
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    scenes = sorted(set(res.line_errors_est) | set(res.line_errors_gt))
+    for k, scene in enumerate(scenes):
+        color = f"C{k % 10}"
+        for vals, style, what in (
+            (res.line_errors_est.get(scene, []), "-", "estimated F"),
+            (res.line_errors_gt.get(scene, []), "--", "GT F"),
         ):
             if vals:
                 share = 100.0 * np.mean(np.asarray(vals) <= 0.5)
-                _cdf(ax, vals, f"{label} ({share:.0f}% <= 0.5 px)")
-        ax.set_xlim(0, 3)
-        ax.legend(fontsize=8, loc="lower right")
+                label = f"{scene}, {what} ({share:.0f}% <= 0.5 px)"
+                _cdf(ax, vals, label, color=color, linestyle=style)
+    if scenes:
+        ax.legend(fontsize=7, loc="lower right")
     else:
         ax.text(0.5, 0.5, "no separable run found a line pair", ha="center", transform=ax.transAxes)
+    ax.set_xlim(0, 3)
     ax.set(
-        xlabel="line homography error (px)",
+        xlabel="line homography error (px, along the lines)",
         ylabel="CDF",
         title="Line homography error of the line inliers",
     )
@@ -293,12 +300,16 @@ def _canvas(ex: Example, which: str) -> np.ndarray:
         img = read_image(path)
         if img.dtype != np.uint8:
             img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
-        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR) if img.ndim == 2 else img[..., :3].copy()
+        if img.ndim == 3:  # grey background: the coloured overlays stand out, PNGs stay small
+            img = cv2.cvtColor(img[..., :3], cv2.COLOR_BGR2GRAY)
+        return cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
     w, h = size
     return np.full((h, w, 3), 40, dtype=np.uint8)
 
 
-def example_figure(ex: Example, threshold: float, path: Path, n_lines: int = 12) -> None:
+def example_figure(
+    ex: Example, threshold: float, path: Path, n_lines: int = 12, max_width: int = 900
+) -> None:
     """Both images side by side: putative matches (grey), inliers of the run (green), the line
     pair (blue), its inliers (red circles), and epipolar lines of a few inliers (yellow)."""
     canv = [_canvas(ex, "a"), _canvas(ex, "b")]
@@ -335,8 +346,8 @@ def example_figure(ex: Example, threshold: float, path: Path, n_lines: int = 12)
     h = max(c.shape[0] for c in canv)
     canv = [cv2.copyMakeBorder(c, 0, h - c.shape[0], 0, 8, cv2.BORDER_CONSTANT) for c in canv]
     out = np.concatenate(canv, axis=1)
-    if out.shape[1] > 1400:
-        s = 1400 / out.shape[1]
+    if out.shape[1] > max_width:
+        s = max_width / out.shape[1]
         out = cv2.resize(out, None, fx=s, fy=s, interpolation=cv2.INTER_AREA)
     label = (
         f"{ex.pair.pair_id}  {ex.method}: {int(inl.sum())}/{len(inl)} inliers, "
@@ -344,7 +355,7 @@ def example_figure(ex: Example, threshold: float, path: Path, n_lines: int = 12)
     )
     band = np.full((26, out.shape[1], 3), 255, dtype=np.uint8)
     cv2.putText(band, label, (6, 18), cv2.FONT_HERSHEY_SIMPLEX, 0.5, (0, 0, 0), 1, cv2.LINE_AA)
-    cv2.imwrite(str(path), np.concatenate([band, out], axis=0))
+    cv2.imwrite(str(path), np.concatenate([band, out], axis=0), [cv2.IMWRITE_PNG_COMPRESSION, 9])
 
 
 # ------------------------------------------------------------------------------------ report

@@ -57,8 +57,8 @@ class EvalResults:
             outlier_rate, cached.
         errors: pairs that could not be evaluated, with the reason.
         line_inliers: (method, count) per separable run that found a line pair.
-        line_errors_est / line_errors_gt: pooled line transfer errors (px) of the line inliers
-            under the estimated F and under the GT F, first separable method, all seeds.
+        line_errors_est / line_errors_gt: scene -> line homography errors (px) of the line
+            inliers under the estimated F and under the GT F, first separable method, all seeds.
         examples: scene -> Example (first evaluated pair of the scene, first seed).
     """
 
@@ -68,8 +68,8 @@ class EvalResults:
     pairs: list[dict] = field(default_factory=list)
     errors: list[PairError] = field(default_factory=list)
     line_inliers: list[tuple[str, int]] = field(default_factory=list)
-    line_errors_est: list[float] = field(default_factory=list)
-    line_errors_gt: list[float] = field(default_factory=list)
+    line_errors_est: dict[str, list[float]] = field(default_factory=dict)
+    line_errors_gt: dict[str, list[float]] = field(default_factory=dict)
     examples: dict[str, Example] = field(default_factory=dict)
 
 
@@ -160,7 +160,7 @@ def evaluate(
                 if method.separable and r.line_pair is not None and len(r.line_inliers):
                     res.line_inliers.append((method.name, len(r.line_inliers)))
                     if method.name == line_method:
-                        _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair.F_gt)
+                        _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair)
                 if pair.scene not in res.examples and seed == cfg.seeds[0]:
                     if method.name == (line_method or methods[0].name):
                         res.examples[pair.scene] = Example(
@@ -171,14 +171,14 @@ def evaluate(
     return res
 
 
-def _collect_line_errors(res: EvalResults, r: MethodResult, pts_a, pts_b, F_gt) -> None:
+def _collect_line_errors(res: EvalResults, r: MethodResult, pts_a, pts_b, pair: PairSpec) -> None:
     idx = r.line_inliers
-    line_b = np.asarray(r.line_pair[1], dtype=np.float64)
+    la, lb = (np.asarray(line, dtype=np.float64) for line in r.line_pair)
     if r.F is not None:
-        e = metrics.line_transfer_error(r.F, line_b, pts_a[idx], pts_b[idx])
-        res.line_errors_est.extend(float(x) for x in e)
-    e = metrics.line_transfer_error(F_gt, line_b, pts_a[idx], pts_b[idx])
-    res.line_errors_gt.extend(float(x) for x in e)
+        e = metrics.line_homography_error(r.F, la, lb, pts_a[idx], pts_b[idx])
+        res.line_errors_est.setdefault(pair.scene, []).extend(float(x) for x in e)
+    e = metrics.line_homography_error(pair.F_gt, la, lb, pts_a[idx], pts_b[idx])
+    res.line_errors_gt.setdefault(pair.scene, []).extend(float(x) for x in e)
 
 
 def per_pair_values(runs: list[dict], method: str, key: str) -> dict[str, float]:

@@ -2,12 +2,13 @@
 
 Example (the README's command, from the repository root)::
 
-    sepfm_ros eval --manifest ../shared/data/pairs.json --out docs/eval --cache .eval_cache
+    sepfm_ros eval --manifest ../shared/data/pairs.json --out docs/eval --readme README.md
 
-writes ``docs/eval/report.md`` with tables, PNG figures and per-run CSVs. Pairs that cannot be
-evaluated (missing image, malformed F, fewer than 8 matches, ...) are listed in the report with
-the reason; they do not stop the run. Exit code 0 when at least one pair was evaluated, 1 when
-none was, 2 on bad arguments or an unreadable manifest.
+writes ``docs/eval/report.md`` with tables, PNG figures and per-run CSVs, and the overall table
+into README.md between its ``eval-table`` markers. Matches are cached in ``.cache/eval_matches``.
+Pairs that cannot be evaluated (missing image, malformed F, fewer than 8 matches, ...) are listed
+in the report with the reason; they do not stop the run. Exit code 0 when at least one pair was
+evaluated, 1 when none was, 2 on bad arguments or an unreadable manifest.
 """
 
 from __future__ import annotations
@@ -61,9 +62,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--cache",
         type=Path,
-        default=Path(".eval_cache"),
+        default=Path(".cache/eval_matches"),
         help="folder for cached matches, keyed by image content + settings "
-        "(default: .eval_cache); 'none' disables caching",
+        "(default: .cache/eval_matches); 'none' disables caching",
     )
     p.add_argument("--features", choices=FEATURES, default="sift", help="default: sift")
     p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default: 0.8)")

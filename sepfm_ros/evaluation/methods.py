@@ -165,7 +165,8 @@ def _registry() -> dict[str, Method]:
         ("cv-accurate", cv2.USAC_ACCURATE, "cv2.findFundamentalMat USAC_ACCURATE"),
     ):
         reg[name] = Method(name, "opencv", desc, _opencv(flag))
-    reg["poselib"] = Method("poselib", "poselib", "poselib.estimate_fundamental", _poselib)
+    desc = "poselib.estimate_fundamental (LO-RANSAC + refinement; PoseLib's min_iterations 1000)"
+    reg["poselib"] = Method("poselib", "poselib", desc, _poselib)
     return reg
 
 

@@ -534,8 +534,6 @@ class SepfmNode(Node):
 
 def _usage() -> str:
     lines = [
-        "usage: sepfm_ros node [--ros-args -p NAME:=VALUE ... | --params-file FILE | -r A:=B]",
-        "",
         "The sepfm node: subscribes to left/image_raw + right/image_raw (mode:=stereo) or",
         "image_raw (mode:=motion), publishes ~/fundamental (64FC1 3x3 Image), ~/matches",
         "(PointCloud2), ~/estimate_info and /diagnostics (DiagnosticArray), ~/debug_image.",
@@ -559,7 +557,12 @@ def main(argv: list[str]) -> int:
     from rclpy.utilities import remove_ros_args
 
     own = remove_ros_args(["sepfm", *argv])[1:]
-    parser = argparse.ArgumentParser(prog="sepfm_ros node", usage=_usage(), add_help=True)
+    parser = argparse.ArgumentParser(
+        prog="sepfm_ros node",
+        usage="%(prog)s [--ros-args -p NAME:=VALUE ... --params-file FILE -r FROM:=TO ...]",
+        description=_usage(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
     parser.parse_args(own)
     rclpy.init(args=["sepfm", *argv])
     node = None

@@ -1,0 +1,293 @@
+"""``sepfm_ros make_bag``: build a bag from a folder of images, ``../shared/data`` or the renderer.
+
+Sources (one of):
+
+- ``--images DIR`` (motion) or ``--left DIR --right DIR`` (stereo, files paired by sorted order);
+- ``--shared kitti_stereo|kitti_motion|templeRing`` with ``--data`` (default ``../shared/data``):
+  the sequences of cameras.json, with ground truth;
+- ``--synthetic stereo|motion``: the package's own renderer (:mod:`sepfm_ros.synthetic`), with
+  exact ground truth.
+
+Topics: stereo ``/left/image_raw`` + ``/right/image_raw`` with equal stamps, motion ``/image_raw``
+(``.../compressed`` with ``--encoding compressed``). When the cameras are known the bag also holds
+``/ground_truth/fundamental``: sensor_msgs/Image 64FC1 3x3 row-major F with ``x_b^T F x_a = 0``
+(a = left or previous frame, b = right or current frame), stamped like the node's
+``~/fundamental`` (the left image's stamp in stereo, the current frame's in motion). Stamps are
+``--start-time`` + k / ``--rate``, message log times equal the stamps.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+from rclpy.serialization import serialize_message
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry import fundamental_from_cameras
+from sepfm_ros.ros.bag_io import (
+    COMPRESSED_IMAGE,
+    GROUND_TRUTH_TOPIC,
+    IMAGE,
+    BagError,
+    BagWriter,
+    check_output_path,
+)
+from sepfm_ros.ros.image_conversion import numpy_to_compressed, numpy_to_image
+from sepfm_ros.ros.messages import fundamental_to_image
+
+ENCODINGS = ("mono8", "bgr8", "compressed")
+SHARED_SEQUENCES = ("kitti_stereo", "kitti_motion", "templeRing")
+DEFAULT_START_TIME_S = 1_700_000_000.0
+STEREO_TOPICS = ("/left/image_raw", "/right/image_raw")
+MOTION_TOPIC = "/image_raw"
+
+
+@dataclass(frozen=True)
+class SourceFrame:
+    """One time step: images (1 = motion, 2 = stereo) loaded lazily, cameras (3x4) or None."""
+
+    paths: tuple[Path, ...] | None
+    images: tuple[np.ndarray, ...] | None
+    cameras: tuple[np.ndarray, ...] | None
+
+    def load(self) -> tuple[np.ndarray, ...]:
+        if self.images is not None:
+            return self.images
+        assert self.paths is not None
+        out = []
+        for p in self.paths:
+            img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+            if img is None:
+                raise BagError(f"cannot read image {p}")
+            out.append(img)
+        return tuple(out)
+
+
+def _image_files(folder: Path) -> list[Path]:
+    if not folder.is_dir():
+        raise BagError(f"image folder not found: {folder}")
+    exts = {".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".pgm", ".ppm"}
+    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in exts)
+    if not files:
+        raise BagError(f"no images in {folder}")
+    return files
+
+
+def shared_frames(data: Path, sequence: str) -> tuple[str, list[SourceFrame]]:
+    """(mode, frames) of a ``../shared/data`` sequence with its cameras (cameras.json)."""
+    cams_file = data / "cameras.json"
+    if not cams_file.is_file():
+        raise BagError(f"shared data not found: {cams_file} does not exist")
+    cams = json.loads(cams_file.read_text())
+
+    def cam(rel: str) -> np.ndarray:
+        return np.asarray(cams[rel], dtype=np.float64)
+
+    if sequence in ("kitti_stereo", "kitti_motion"):
+        lefts = sorted(k for k in cams if k.startswith("kitti_seq2/left/"))
+        if sequence == "kitti_motion":
+            frames = [SourceFrame((data / k,), None, (cam(k),)) for k in lefts]
+            return "motion", frames
+        frames = []
+        for k in lefts:
+            r = k.replace("/left/", "/right/")
+            if r in cams:
+                frames.append(SourceFrame((data / k, data / r), None, (cam(k), cam(r))))
+        return "stereo", frames
+    if sequence == "templeRing":
+        keys = sorted(k for k in cams if k.startswith("templeRing/"))
+        return "motion", [SourceFrame((data / k,), None, (cam(k),)) for k in keys]
+    raise BagError(f"unknown shared sequence {sequence!r}; one of {', '.join(SHARED_SEQUENCES)}")
+
+
+def synthetic_frames(kind: str, n_frames: int, seed: int) -> tuple[str, list[SourceFrame]]:
+    """(mode, frames) rendered by :mod:`sepfm_ros.synthetic` (exact cameras)."""
+    from sepfm_ros.synthetic.sequences import motion_sequence, stereo_sequence
+
+    if kind == "stereo":
+        seq = stereo_sequence(n_frames, seed=seed)
+    elif kind == "motion":
+        seq = motion_sequence(n_frames, seed=seed)
+    else:
+        raise BagError(f"--synthetic must be stereo or motion, got {kind!r}")
+    frames = [SourceFrame(None, f.images, tuple(c.P for c in f.cameras)) for f in seq]
+    return kind, frames
+
+
+def _convert(img: np.ndarray, encoding: str) -> np.ndarray:
+    """A loaded image (grey, BGR or BGRA, 8 or 16 bit) -> mono8 or bgr8 numpy."""
+    if img.dtype != np.uint8:
+        img = cv2.normalize(img, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+    if img.ndim == 3 and img.shape[2] == 4:
+        img = cv2.cvtColor(img, cv2.COLOR_BGRA2BGR)
+    if encoding == "mono8":
+        return img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)
+    return img if img.ndim == 3 else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
+
+
+def image_bytes(img: np.ndarray, encoding: str, header: Header, fmt: str = "png") -> bytes:
+    """Serialized sensor_msgs/Image (mono8/bgr8) or CompressedImage (``encoding`` compressed)."""
+    if encoding == "compressed":
+        return serialize_message(
+            numpy_to_compressed(_convert(img, "bgr8" if img.ndim == 3 else "mono8"), fmt, header)
+        )
+    return serialize_message(numpy_to_image(_convert(img, encoding), encoding, header))
+
+
+def _header(stamp_ns: int, frame_id: str) -> Header:
+    h = Header(frame_id=frame_id)
+    h.stamp.sec = int(stamp_ns // 1_000_000_000)
+    h.stamp.nanosec = int(stamp_ns % 1_000_000_000)
+    return h
+
+
+def bag_messages(
+    mode: str,
+    frames: list[SourceFrame],
+    rate_hz: float,
+    encoding: str,
+    start_time_s: float = DEFAULT_START_TIME_S,
+    compressed_format: str = "png",
+) -> Iterator[tuple[str, str, int, bytes]]:
+    """(topic, msgtype, stamp_ns, cdr) of every message, in time order."""
+    suffix = "/compressed" if encoding == "compressed" else ""
+    msgtype = COMPRESSED_IMAGE if encoding == "compressed" else IMAGE
+    t0 = int(round(start_time_s * 1e9))
+    dt = int(round(1e9 / rate_hz))
+    prev_cam = None
+    for k, frame in enumerate(frames):
+        stamp = t0 + k * dt
+        images = frame.load()
+        if mode == "stereo":
+            for topic, img, fid in zip(
+                STEREO_TOPICS, images, ("camera_left", "camera_right"), strict=True
+            ):
+                yield (
+                    topic + suffix,
+                    msgtype,
+                    stamp,
+                    image_bytes(img, encoding, _header(stamp, fid), compressed_format),
+                )
+            if frame.cameras is not None:
+                F = fundamental_from_cameras(frame.cameras[0], frame.cameras[1])
+                msg = fundamental_to_image(F, _header(stamp, "camera_left"))
+                yield GROUND_TRUTH_TOPIC, IMAGE, stamp, serialize_message(msg)
+        else:
+            hdr = _header(stamp, "camera")
+            yield (
+                MOTION_TOPIC + suffix,
+                msgtype,
+                stamp,
+                image_bytes(images[0], encoding, hdr, compressed_format),
+            )
+            if frame.cameras is not None and prev_cam is not None:
+                F = fundamental_from_cameras(prev_cam, frame.cameras[0])
+                yield (
+                    GROUND_TRUTH_TOPIC,
+                    IMAGE,
+                    stamp,
+                    serialize_message(fundamental_to_image(F, hdr)),
+                )
+            prev_cam = frame.cameras[0] if frame.cameras is not None else None
+
+
+def make_bag(
+    out: Path,
+    mode: str,
+    frames: list[SourceFrame],
+    rate_hz: float = 10.0,
+    encoding: str = "mono8",
+    start_time_s: float = DEFAULT_START_TIME_S,
+    compress: bool = False,
+    compressed_format: str = "png",
+) -> int:
+    """Write ``frames`` into a new bag at ``out``; returns the number of messages."""
+    check_output_path(out)
+    if not frames:
+        raise BagError("no frames selected")
+    if rate_hz <= 0:
+        raise BagError(f"--rate must be > 0, got {rate_hz}")
+    count = 0
+    with BagWriter(out, flush_interval_s=None, compress=compress) as writer:
+        for topic, msgtype, stamp, data in bag_messages(
+            mode, frames, rate_hz, encoding, start_time_s, compressed_format
+        ):
+            writer.add_topic(topic, msgtype)
+            writer.write(topic, stamp, data)
+            count += 1
+    return count
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="sepfm_ros make_bag",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    src = p.add_mutually_exclusive_group(required=True)
+    src.add_argument("--images", type=Path, help="folder of images (motion)")
+    src.add_argument("--left", type=Path, help="folder of left images (stereo, with --right)")
+    src.add_argument("--shared", choices=SHARED_SEQUENCES, help="a sequence of --data")
+    src.add_argument("--synthetic", choices=("stereo", "motion"), help="rendered scene")
+    p.add_argument("--right", type=Path, help="folder of right images (stereo)")
+    p.add_argument("--data", type=Path, default=Path("../shared/data"), help="shared data folder")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output bag (must not exist)")
+    p.add_argument("--rate", type=float, default=10.0, help="frames per second (default 10)")
+    p.add_argument("--encoding", choices=ENCODINGS, default="mono8")
+    p.add_argument("--compressed-format", choices=("png", "jpeg"), default="png")
+    p.add_argument("--start", type=int, default=0, help="first frame index (default 0)")
+    p.add_argument("--count", type=int, default=0, help="number of frames (0 = all)")
+    p.add_argument("--step", type=int, default=1, help="take every STEP-th frame (default 1)")
+    p.add_argument("--frames", type=int, default=12, help="--synthetic: frames to render")
+    p.add_argument("--seed", type=int, default=0, help="--synthetic: scene seed")
+    p.add_argument("--start-time", type=float, default=DEFAULT_START_TIME_S, help="first stamp, s")
+    p.add_argument("--compress", action="store_true", help="zstd-compress mcap chunks")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str]) -> int:
+    args = _parse(argv)
+    try:
+        check_output_path(args.output)
+        if args.shared:
+            mode, frames = shared_frames(args.data, args.shared)
+        elif args.synthetic:
+            mode, frames = synthetic_frames(args.synthetic, args.frames, args.seed)
+        elif args.images:
+            mode = "motion"
+            frames = [SourceFrame((f,), None, None) for f in _image_files(args.images)]
+        else:
+            if args.right is None:
+                raise BagError("--left needs --right")
+            lefts, rights = _image_files(args.left), _image_files(args.right)
+            if len(lefts) != len(rights):
+                raise BagError(f"{len(lefts)} left images but {len(rights)} right images")
+            mode = "stereo"
+            frames = [SourceFrame((a, b), None, None) for a, b in zip(lefts, rights, strict=True)]
+        if args.start < 0 or args.count < 0 or args.step < 1:
+            raise BagError("--start and --count must be >= 0, --step >= 1")
+        stop = None if args.count == 0 else args.start + args.count * args.step
+        frames = frames[args.start : stop : args.step]
+        n = make_bag(
+            args.output,
+            mode,
+            frames,
+            args.rate,
+            args.encoding,
+            args.start_time,
+            args.compress,
+            args.compressed_format,
+        )
+    except BagError as err:
+        print(f"sepfm_ros make_bag: error: {err}", file=sys.stderr)
+        return 1
+    gt = " with ground truth" if frames[0].cameras is not None else ""
+    print(f"wrote {args.output}: {mode}, {len(frames)} frames, {n} messages{gt}")
+    return 0

@@ -1,0 +1,391 @@
+"""``sepfm_ros process BAG -o OUT``: the node's pipeline over a bag, without DDS.
+
+Reads the input images of BAG (stereo ``/left/image_raw`` + ``/right/image_raw``, or motion
+``/image_raw``; ``.../compressed`` when the bag holds CompressedImage), pairs them exactly as the
+node does (the node's approximate-time policy for stereo, frame t - ``frame_gap`` and t for
+motion), runs the same :class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the same parameters
+(``-p name:=value``, the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
+the node's outputs with the source stamps to OUT: ``/sepfm/fundamental``, ``/sepfm/matches``,
+``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it).
+
+A progress bar runs on stderr; at the end a summary (per-frame table with ``--table``) is printed,
+scored against the ground truth when the bag has it. Every result is flushed to OUT as soon as it
+is computed (see :class:`~sepfm_ros.ros.bag_io.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
+leave a readable OUT holding every result computed before the interruption.
+
+Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import signal
+import sys
+import time
+from collections import deque
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
+from rosbags.interfaces import QosTime as _QosTime
+from sensor_msgs.msg import CompressedImage, Image
+from tqdm import tqdm
+
+from sepfm_ros.pipeline.pipeline import Pipeline
+from sepfm_ros.ros.bag_io import (
+    COMPRESSED_IMAGE,
+    DIAGNOSTIC_ARRAY,
+    GROUND_TRUTH_TOPIC,
+    IMAGE,
+    POINTCLOUD2,
+    BagError,
+    BagReader,
+    BagWriter,
+    StampChecker,
+    TopicNotFoundError,
+    check_output_path,
+    header_stamp_ns,
+)
+from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.messages import (
+    copy_header,
+    estimate_info,
+    fundamental_to_image,
+    result_to_pointcloud2,
+    stamp_ns,
+)
+from sepfm_ros.ros.node import PARAMS, parameter_error, pipeline_config
+from sepfm_ros.ros.results import (
+    OUTPUT_NAMESPACE,
+    format_summary,
+    format_table,
+    output_topics,
+    read_results,
+    summarize,
+)
+from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+
+# The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
+_ZERO = _QosTime(0, 0)
+_INF = _QosTime(2147483647, 4294967295)
+OUTPUT_QOS = Qos(
+    QosHistory.KEEP_LAST,
+    10,
+    QosReliability.RELIABLE,
+    QosDurability.VOLATILE,
+    _INF,
+    _INF,
+    QosLiveliness.AUTOMATIC,
+    _INF,
+    False,
+)
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """Which topics of a bag feed the pipeline and how."""
+
+    mode: str  # "stereo" or "motion"
+    transport: str  # "raw" or "compressed"
+    topics: tuple[str, ...]  # (left, right) or (image,)
+
+    def node_params(self) -> list[str]:
+        """``--ros-args`` for a node that consumes this bag as recorded."""
+        return ["-p", f"mode:={self.mode}", "-p", f"transport:={self.transport}"]
+
+
+def detect_inputs(reader: BagReader, mode: str | None = None) -> InputSpec:
+    """Find the input topics of a bag (stereo preferred when ``mode`` is None).
+
+    Raises TopicNotFoundError (no image topics) or UnknownTypeError (wrong message type).
+    """
+    candidates = []
+    for transport, suffix in (("raw", ""), ("compressed", "/compressed")):
+        stereo = (f"/left/image_raw{suffix}", f"/right/image_raw{suffix}")
+        motion = (f"/image_raw{suffix}",)
+        candidates.append(("stereo", transport, stereo))
+        candidates.append(("motion", transport, motion))
+    for m, transport, topics in candidates:
+        if mode not in (None, m):
+            continue
+        if all(t in reader.topics for t in topics):
+            expected = COMPRESSED_IMAGE if transport == "compressed" else IMAGE
+            for t in topics:
+                reader.require(t, (expected,))
+            return InputSpec(m, transport, topics)
+    want = "left/image_raw + right/image_raw" if mode == "stereo" else "image_raw"
+    if mode is None:
+        want = "/left/image_raw + /right/image_raw (stereo) or /image_raw (motion)"
+    have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(reader.topics.items()))
+    raise TopicNotFoundError(
+        f"bag {reader.path} has no input images: expected {want} (or .../compressed); "
+        f"it has: {have or 'no topics'}"
+    )
+
+
+@dataclass
+class PairJob:
+    """One pair, as the node's worker gets it (a = left/earlier, b = right/current)."""
+
+    msg_a: Any
+    msg_b: Any
+    header: Any
+    key_a: Any
+    key_b: Any
+
+
+def iter_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> Iterator[PairJob]:
+    """The pairs the node would form from the bag's input messages, in order.
+
+    Raises StampOrderError when an input topic's header stamps repeat or go backwards.
+    """
+    msg_class = CompressedImage if spec.transport == "compressed" else Image
+    checker = StampChecker()
+    if spec.mode == "stereo":
+        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(
+            int(round(params["sync_slop_s"] * 1e9)), int(params["sync_queue_size"])
+        )
+        for i, raw in enumerate(reader.messages(spec.topics)):
+            msg = deserialize_message(raw.data, msg_class)
+            stamp = stamp_ns(msg.header.stamp)
+            checker.check(raw.topic, stamp, i)
+            side = LEFT if raw.topic == spec.topics[0] else RIGHT
+            pair = sync.add(side, stamp, msg)
+            if pair is None:
+                continue
+            left, right = pair
+            yield PairJob(
+                left,
+                right,
+                copy_header(left.header),
+                ("l", stamp_ns(left.header.stamp)),
+                ("r", stamp_ns(right.header.stamp)),
+            )
+    else:
+        gap = int(params["frame_gap"])
+        history: deque[tuple[Any, int]] = deque(maxlen=gap + 1)
+        for i, raw in enumerate(reader.messages(spec.topics)):
+            msg = deserialize_message(raw.data, msg_class)
+            stamp = stamp_ns(msg.header.stamp)
+            checker.check(raw.topic, stamp, i)
+            history.append((msg, stamp))
+            if len(history) == history.maxlen:
+                first = history[0]
+                yield PairJob(first[0], msg, copy_header(msg.header), first[1], stamp)
+
+
+def validate_inputs(reader: BagReader, spec: InputSpec) -> None:
+    """Scan the input topics' header stamps before any output exists.
+
+    Raises StampOrderError (repeated or backwards stamps) or BagCorruptError (unreadable data).
+    """
+    checker = StampChecker()
+    for i, raw in enumerate(reader.messages(spec.topics)):
+        checker.check(raw.topic, header_stamp_ns(raw.data), i)
+
+
+def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> int:
+    """How many pairs the bag should give (for the progress bar and success rates)."""
+    counts = [reader.topics[t].count for t in spec.topics]
+    if spec.mode == "stereo":
+        return min(counts)
+    return max(0, counts[0] - int(params["frame_gap"]))
+
+
+def parse_params(items: list[str]) -> dict[str, Any]:
+    """``name:=value`` strings -> node parameter values (defaults for the rest), validated."""
+    values = {name: spec.default for name, spec in PARAMS.items()}
+    for item in items:
+        if ":=" not in item:
+            raise BagError(f"parameter {item!r} is not of the form name:=value")
+        name, text = item.split(":=", 1)
+        if name not in PARAMS:
+            raise BagError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
+        default = PARAMS[name].default
+        try:
+            if isinstance(default, bool):
+                if text.lower() not in ("true", "false"):
+                    raise ValueError
+                value: Any = text.lower() == "true"
+            elif isinstance(default, int):
+                value = int(text)
+            elif isinstance(default, float):
+                value = float(text)
+            else:
+                value = text
+        except ValueError:
+            raise BagError(f"parameter {name}: cannot read {text!r}") from None
+        error = parameter_error(name, value)
+        if error:
+            raise BagError(error)
+        values[name] = value
+    return values
+
+
+def run_process(
+    bag: Path,
+    out: Path,
+    params: dict[str, Any],
+    mode: str | None = None,
+    progress: bool = True,
+    namespace: str = OUTPUT_NAMESPACE,
+) -> tuple[int, int]:
+    """Process ``bag`` into a new bag ``out``; returns (pairs processed, pairs expected).
+
+    Raises BagError subclasses on bad input; KeyboardInterrupt propagates after ``out`` is closed
+    (readable, holding every result so far).
+    """
+    check_output_path(out)
+    topics = output_topics(namespace)
+    try:
+        config = pipeline_config(params)
+    except ValueError as err:
+        raise BagError(str(err)) from None
+    with BagReader(bag) as reader:
+        spec = detect_inputs(reader, mode)
+        validate_inputs(reader, spec)
+        total = expected_pairs(reader, spec, params)
+        has_gt = GROUND_TRUTH_TOPIC in reader.topics
+        if has_gt:
+            reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
+        pipeline = Pipeline(config, cache_size=8)
+        done = 0
+        with BagWriter(out, flush_interval_s=None) as writer:
+            writer.add_topic(topics["fundamental"], IMAGE, (OUTPUT_QOS,))
+            writer.add_topic(topics["matches"], POINTCLOUD2, (OUTPUT_QOS,))
+            writer.add_topic(topics["estimate_info"], DIAGNOSTIC_ARRAY, (OUTPUT_QOS,))
+            if has_gt:
+                writer.add_topic(GROUND_TRUTH_TOPIC, IMAGE, reader.topics[GROUND_TRUTH_TOPIC].qos)
+                for raw in reader.messages([GROUND_TRUTH_TOPIC]):
+                    writer.write(GROUND_TRUTH_TOPIC, raw.log_time_ns, raw.data)
+                writer.flush()
+            bar = tqdm(
+                total=total,
+                unit="pair",
+                desc=f"process {bag.name}",
+                file=sys.stderr,
+                disable=not progress,
+                dynamic_ncols=True,
+            )
+            try:
+                for job in iter_pairs(reader, spec, params):
+                    for data in process_pair(pipeline, job, params, topics):
+                        writer.write(data[0], stamp_ns(job.header.stamp), data[1])
+                    writer.flush()  # every result survives a kill from now on
+                    done += 1
+                    bar.update(1)
+            finally:
+                bar.close()
+    return done, total
+
+
+def process_pair(
+    pipeline: Pipeline, job: PairJob, params: dict[str, Any], topics: dict[str, str]
+) -> list[tuple[str, bytes]]:
+    """The node's outputs for one pair as (topic, CDR bytes); mirrors ``SepfmNode._process``."""
+    t0 = time.perf_counter()
+    try:
+        image_a = message_to_numpy(job.msg_a, "mono8")
+        image_b = message_to_numpy(job.msg_b, "mono8")
+    except ImageDecodeError as err:
+        print(
+            f"\nskipping the pair at {job.header.stamp.sec}.{job.header.stamp.nanosec:09d}: {err}",
+            file=sys.stderr,
+        )
+        return []
+    decode_ms = (time.perf_counter() - t0) * 1e3
+    if image_a.shape != image_b.shape:
+        print(
+            f"\nskipping a pair: image sizes differ {image_a.shape} vs {image_b.shape}",
+            file=sys.stderr,
+        )
+        return []
+    result = pipeline.process(
+        image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
+    )
+    out = []
+    if result.estimate.F is not None and (result.ok or params["publish_unreliable"]):
+        out.append(
+            (
+                topics["fundamental"],
+                serialize_message(fundamental_to_image(result.estimate.F, job.header)),
+            )
+        )
+    out.append((topics["matches"], serialize_message(result_to_pointcloud2(result, job.header))))
+    info = estimate_info(
+        result,
+        job.header,
+        job.msg_a.header.stamp,
+        job.msg_b.header.stamp,
+        pipeline.config.features,
+        node_name=OUTPUT_NAMESPACE,
+    )
+    out.append((topics["estimate_info"], serialize_message(info)))
+    return out
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="sepfm_ros process",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("bag", type=Path, help="input bag (directory or .mcap)")
+    p.add_argument("-o", "--output", type=Path, required=True, help="output bag (must not exist)")
+    p.add_argument("--mode", choices=("stereo", "motion"), help="default: from the bag's topics")
+    p.add_argument(
+        "-p",
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="a node parameter (e.g. seed:=0, method:=sep5, features:=orb); repeatable",
+    )
+    p.add_argument("--table", action="store_true", help="print the per-frame table")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str]) -> int:
+    args = _parse(argv)
+    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    interrupted = False
+    try:
+        params = parse_params(args.param)
+        done, total = run_process(args.bag, args.output, params, args.mode, not args.quiet)
+    except BagError as err:
+        print(f"sepfm_ros process: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        interrupted = True
+        done, total = -1, -1
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    if interrupted and not args.output.exists():
+        print("sepfm_ros process: interrupted before any output", file=sys.stderr)
+        return 130
+    try:
+        results = read_results(args.output)
+    except BagError as err:
+        print(f"sepfm_ros process: error reading back {args.output}: {err}", file=sys.stderr)
+        return 1
+    if args.table:
+        print(format_table(results))
+    expected = None if interrupted else total
+    print(format_summary(summarize(results, expected)))
+    if interrupted:
+        print(
+            f"sepfm_ros process: interrupted; {args.output} holds the {len(results)} results "
+            "computed before the interruption",
+            file=sys.stderr,
+        )
+        return 130
+    print(f"wrote {args.output}: {done} of {total} pairs")
+    return 0

@@ -9,6 +9,10 @@ into README.md between its ``eval-table`` markers. Matches are cached in ``.cach
 Pairs that cannot be evaluated (missing image, malformed F, fewer than 8 matches, ...) are listed
 in the report with the reason; they do not stop the run. Exit code 0 when at least one pair was
 evaluated, 1 when none was, 2 on bad arguments or an unreadable manifest.
+
+``--bags PATH`` (repeatable) adds pairs from a bag or a folder of bags with ground truth: input
+bags made by ``make_bag`` (pairs as the node forms them) or bags written by ``process`` (the
+node's own matches); see :mod:`sepfm_ros.evaluation.bags`.
 """
 
 from __future__ import annotations
@@ -46,9 +50,17 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--manifest",
-        required=True,
         type=Path,
+        default=None,
         help="JSON list of pairs in the format of ../shared/data/pairs.json",
+    )
+    p.add_argument(
+        "--bags",
+        type=Path,
+        action="append",
+        default=[],
+        help="a bag, or a folder of bags, with /ground_truth/fundamental: input bags (images, "
+        "as made by make_bag) or bags written by process; repeatable",
     )
     p.add_argument(
         "--root",
@@ -139,19 +151,31 @@ def main(argv: list[str]) -> int:
         parser.error(f"--threshold must be positive, got {args.threshold}")
     if args.baseline not in REGISTRY:
         parser.error(f"unknown --baseline {args.baseline!r}; known: {', '.join(REGISTRY)}")
-    try:
-        pairs, errors = load_manifest(args.manifest, args.root)
-    except ManifestError as exc:
-        print(f"sepfm_ros eval: {exc}", file=sys.stderr)
-        return 2
-    pairs = select_pairs(pairs, args.scenes, args.max_pairs)
+    if args.manifest is None and not args.bags:
+        parser.error("give --manifest and/or --bags")
     cache_dir = None if str(args.cache).lower() == "none" else args.cache
+    pairs, errors = [], []
+    if args.manifest is not None:
+        try:
+            pairs, errors = load_manifest(args.manifest, args.root)
+        except ManifestError as exc:
+            print(f"sepfm_ros eval: {exc}", file=sys.stderr)
+            return 2
+    if args.bags:
+        from sepfm_ros.evaluation.bags import load_bag_pairs  # needs the ROS message packages
+
+        frames_dir = (cache_dir or args.out) / "bag_frames"
+        for bag in args.bags:
+            p, e = load_bag_pairs(bag, frames_dir)
+            pairs += p
+            errors += e
+    pairs = select_pairs(pairs, args.scenes, args.max_pairs)
     cache = MatchesCache(cache_dir, settings)
     config = EvalConfig(args.threshold, args.confidence, tuple(args.seeds), args.baseline)
     total = len(pairs) * len(methods) * len(config.seeds)
     print(
         f"sepfm_ros eval: {len(pairs)} pairs x {len(methods)} methods x {len(config.seeds)} "
-        f"seeds = {total} runs ({len(errors)} manifest entries rejected)",
+        f"seeds = {total} runs ({len(errors)} pairs or bags rejected while loading)",
         file=sys.stderr,
     )
     from tqdm import tqdm

@@ -1,0 +1,149 @@
+"""Pairs with ground truth from bags, for ``sepfm_ros eval --bags``.
+
+Two kinds of bag are read (see :mod:`sepfm_ros.ros.make_bag` and :mod:`sepfm_ros.ros.process`):
+
+- an *input bag* with image topics (stereo ``/left/image_raw`` + ``/right/image_raw`` or motion
+  ``/image_raw``, raw or compressed) and ``/ground_truth/fundamental``: the pairs are the ones the
+  node would form (:func:`sepfm_ros.ros.process.iter_pairs`, default node parameters), each
+  scored against the GT F with the pair's stamp. The decoded frames are written as PNG files into
+  a folder (under the matches cache), so matches are cached by image content like manifest pairs.
+- a bag written by ``process`` (``/sepfm/...`` outputs plus the copied ground truth): the pairs are
+  the node's own matches (``~/matches``) with the GT F of the same stamp, as points entries.
+
+Bag problems (missing, corrupt, no ground truth, no images) become one :class:`PairError` per bag,
+and a pair without ground truth or with an undecodable image one per pair; nothing raises. This
+module needs the ROS message packages (rclpy); the evaluation imports it only for ``--bags``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
+from sepfm_ros.ros.bag_io import GROUND_TRUTH_TOPIC, BagError, BagReader, format_stamp
+from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.messages import stamp_ns
+from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params
+from sepfm_ros.ros.results import OUTPUT_NAMESPACE, output_topics, read_ground_truth, read_results
+
+
+def is_bag(path: Path) -> bool:
+    """A rosbag2 directory (with metadata.yaml) or a bare .mcap / .db3 file."""
+    if path.is_dir():
+        return (path / "metadata.yaml").is_file()
+    return path.suffix in (".mcap", ".db3") and path.is_file()
+
+
+def find_bags(path: Path) -> list[Path]:
+    """``path`` itself when it is a bag, else the bags directly inside it (sorted)."""
+    if is_bag(path):
+        return [path]
+    if path.is_dir():
+        return sorted(p for p in path.iterdir() if is_bag(p))
+    return []
+
+
+def _size(text: str) -> tuple[int, int] | None:
+    try:
+        w, h = (int(v) for v in text.split("x"))
+    except (AttributeError, ValueError):
+        return None
+    return (w, h) if w > 0 and h > 0 else None
+
+
+def _input_bag_pairs(
+    bag: Path, reader: BagReader, frames_dir: Path
+) -> tuple[list[PairSpec], list[PairError]]:
+    spec = detect_inputs(reader)
+    gt = read_ground_truth(bag)
+    pairs, errors = [], []
+    out = frames_dir / bag.name
+    out.mkdir(parents=True, exist_ok=True)
+    for job in iter_pairs(reader, spec, parse_params([])):
+        stamp = stamp_ns(job.header.stamp)
+        pid = f"{bag.name}@{format_stamp(stamp)}"
+        try:
+            if stamp not in gt:
+                raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with stamp {stamp} ns")
+            F = parse_fundamental(gt[stamp])
+            paths = []
+            for tag, msg in (("a", job.msg_a), ("b", job.msg_b)):
+                img = message_to_numpy(msg, "mono8")
+                p = out / f"{stamp}_{tag}.png"
+                if not cv2.imwrite(str(p), img):
+                    raise PairDataError(f"cannot write decoded frame {p}")
+                paths.append(p)
+        except (PairDataError, ImageDecodeError) as exc:
+            errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
+            continue
+        pairs.append(PairSpec(pid, bag.name, F, img_a=paths[0], img_b=paths[1], kind=spec.mode))
+    return pairs, errors
+
+
+def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
+    pairs, errors = [], []
+    for fr in read_results(bag):
+        pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}"
+        pts_a, pts_b = fr.pts()
+        size_a, size_b = _size(fr.info.get("size_a", "")), _size(fr.info.get("size_b", ""))
+        try:
+            if fr.F_gt is None:
+                raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with this stamp")
+            if size_a is None:
+                raise PairDataError("no image size in the estimate info")
+            F = parse_fundamental(fr.F_gt)
+        except PairDataError as exc:
+            errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
+            continue
+        pairs.append(
+            PairSpec(
+                pid,
+                bag.name,
+                F,
+                pts_a=np.ascontiguousarray(pts_a),
+                pts_b=np.ascontiguousarray(pts_b),
+                size_a=size_a,
+                size_b=size_b or size_a,
+                kind="processed",
+            )
+        )
+    return pairs, errors
+
+
+def load_bag_pairs(
+    path: str | Path, frames_dir: str | Path
+) -> tuple[list[PairSpec], list[PairError]]:
+    """Pairs with ground truth from a bag or a folder of bags.
+
+    Args:
+        path: a bag (directory or .mcap/.db3) or a folder holding bags.
+        frames_dir: where decoded frames of input bags are written (one subfolder per bag).
+    Returns:
+        (pairs, errors): errors name the bag (or pair) and the problem.
+    """
+    path = Path(path)
+    bags = find_bags(path)
+    if not bags:
+        return [], [PairError(path.name, path.name, f"no bag found at {path}")]
+    pairs: list[PairSpec] = []
+    errors: list[PairError] = []
+    outputs = set(output_topics(OUTPUT_NAMESPACE).values())
+    for bag in bags:
+        try:
+            with BagReader(bag) as reader:
+                if GROUND_TRUTH_TOPIC not in reader.topics:
+                    raise BagError(f"no {GROUND_TRUTH_TOPIC} topic: nothing to score against")
+                processed = bool(outputs & set(reader.topics))
+                if not processed:
+                    p, e = _input_bag_pairs(bag, reader, Path(frames_dir))
+            if processed:
+                p, e = _processed_bag_pairs(bag)
+        except BagError as exc:
+            errors.append(PairError(bag.name, bag.name, f"bag {bag}: {exc}"))
+            continue
+        pairs += p
+        errors += e
+    return pairs, errors

@@ -37,6 +37,8 @@ setup(
         (f"share/{PACKAGE}", ["package.xml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
+        # the bundled bags (sepfm_ros demo), one folder per bag
+        *[(f"share/{PACKAGE}/{d}", glob(f"{d}/*")) for d in sorted(glob("bags/*"))],
     ],
     python_requires=">=3.10",
     install_requires=[
@@ -45,8 +47,9 @@ setup(
         "rosbags>=0.10",
         "rosbags-image>=0.10",
         # `eval` (sepfm_ros.evaluation): PNG plots of the report (CDFs, trial curves), and the
-        # progress bar of long runs. Both install from binary wheels; packaged as python3-matplotlib and
-        # python3-tqdm for ROS (package.xml), which has no optional dependencies.
+        # progress bar of long runs. Both install from binary wheels; packaged as
+        # python3-matplotlib and python3-tqdm for ROS (package.xml), which has no optional
+        # dependencies.
         "matplotlib>=3.5",
         "tqdm>=4.60",
     ],

@@ -1,0 +1,235 @@
+"""``sepfm_ros demo``: the main job on a bag the package ships, through the live node.
+
+Starts the ``sepfm`` node as a subprocess, replays a bundled bag (``bags/synthetic_stereo`` by
+default: a rendered scene with exact ground truth) into it over DDS at the recorded rate, records
+the node's outputs into a bag, then prints a per-frame table (stamp, matches, inliers, hypotheses,
+error against ground truth) and writes the node's debug image of one frame as a PNG. All of it
+stays on this machine: a random ``ROS_DOMAIN_ID`` and localhost-only discovery unless set.
+
+    sepfm_ros demo [--bag BAG] [--out DIR] [--rate R] [-p NAME:=VALUE ...]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import random
+import signal
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+
+from sepfm_ros.ros.bag_io import BagError, BagReader, check_output_path
+
+PACKAGE_DIR = Path(__file__).resolve().parent
+DEFAULT_BAG = "synthetic_stereo"
+
+
+def bundled_bags_dir() -> Path:
+    """The folder of the bags the package ships.
+
+    ``bags/`` beside the package in a source tree / editable install, or
+    ``<prefix>/share/sepfm_ros/bags`` after ``pip install`` or ``colcon build``.
+    """
+    candidates = [PACKAGE_DIR.parent / "bags", Path(sys.prefix) / "share" / "sepfm_ros" / "bags"]
+    try:
+        from ament_index_python.packages import get_package_share_directory
+
+        candidates.append(Path(get_package_share_directory("sepfm_ros")) / "bags")
+    except Exception:  # noqa: BLE001 - ament_index is optional (not in a plain venv)
+        pass
+    for c in candidates:
+        if (c / DEFAULT_BAG / "metadata.yaml").is_file():
+            return c
+    raise BagError(
+        "the bundled bags were not found (looked in "
+        + ", ".join(str(c) for c in candidates)
+        + "); rebuild them with: python scripts/make_bundled_bags.py"
+    )
+
+
+def isolate_ros_environment() -> None:
+    """Pick a random ROS_DOMAIN_ID and localhost-only discovery unless the user set them."""
+    if "ROS_DOMAIN_ID" not in os.environ:
+        os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+@dataclass
+class LiveRun:
+    """What :func:`replay_through_node` did."""
+
+    expected_pairs: int
+    published: int
+    received: dict[str, int]
+    node_returncode: int | None
+    output: Path
+
+
+def replay_through_node(
+    bag: Path,
+    out: Path,
+    params: list[str] | None = None,
+    rate: float = 1.0,
+    debug_image: bool = True,
+    progress: bool = True,
+    log_path: Path | None = None,
+    startup_timeout_s: float = 60.0,
+    drain_timeout_s: float = 10.0,
+) -> LiveRun:
+    """Replay ``bag`` into a fresh ``sepfm`` node subprocess and record its outputs to ``out``.
+
+    ``params`` are extra node parameters (``name:=value``); mode and transport follow the bag.
+    The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too.
+    """
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+
+    from sepfm_ros.ros.bag_io import BagWriter
+    from sepfm_ros.ros.process import detect_inputs, expected_pairs, parse_params
+    from sepfm_ros.ros.record import Recorder
+    from sepfm_ros.ros.replay import Replayer
+    from sepfm_ros.ros.results import output_topics
+
+    params = list(params or [])
+    check_output_path(out)
+    with BagReader(bag) as reader:
+        spec = detect_inputs(reader)
+        expected = expected_pairs(reader, spec, parse_params(params))
+    cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
+    for p in params:
+        cmd += ["-p", p]
+    log = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
+    node_proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ))
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node(f"sepfm_demo_{os.getpid()}", context=context)
+    executor = SingleThreadedExecutor(context=context)
+    executor.add_node(node)
+    topics = list(output_topics().values())
+    if debug_image:
+        topics.append("/sepfm/debug_image")
+    writer = BagWriter(out, flush_interval_s=1.0)
+    recorder = Recorder(node, writer, topics)
+    stop = threading.Event()
+
+    def spin() -> None:
+        while not stop.is_set():
+            executor.spin_once(timeout_sec=0.05)
+
+    spinner = threading.Thread(target=spin, daemon=True)
+    spinner.start()
+    replayer = None
+    published = 0
+    try:
+        replayer = Replayer(node, bag, topics=spec.topics, rate=rate)
+        deadline = time.monotonic() + startup_timeout_s
+        while not recorder.ready():
+            if node_proc.poll() is not None:
+                raise BagError(f"the node exited with code {node_proc.returncode} at start-up")
+            if time.monotonic() > deadline:
+                raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
+            time.sleep(0.05)
+        replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
+        published = replayer.run(progress=progress)
+        info_topic = output_topics()["estimate_info"]
+        last, last_count = time.monotonic(), -1
+        while recorder.counts[info_topic] < expected:
+            if recorder.counts[info_topic] != last_count:
+                last, last_count = time.monotonic(), recorder.counts[info_topic]
+            if time.monotonic() - last > drain_timeout_s:
+                break
+            time.sleep(0.05)
+        time.sleep(0.3)  # let the last matches/debug image of the final pair arrive
+    finally:
+        if node_proc.poll() is None:
+            node_proc.send_signal(signal.SIGINT)
+            try:
+                node_proc.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                node_proc.kill()
+                node_proc.wait()
+        stop.set()
+        spinner.join(timeout=5)
+        if replayer is not None:
+            replayer.close()
+        recorder.close()
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+        if log is not subprocess.DEVNULL:
+            log.close()
+    return LiveRun(expected, published, dict(recorder.counts), node_proc.returncode, out)
+
+
+def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
+    """Write the node's ~/debug_image at ``stamp_ns`` (or the nearest) as PNG; False if none."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import Image
+
+    from sepfm_ros.ros.image_conversion import message_to_numpy
+
+    best = None
+    with BagReader(live_bag) as reader:
+        if "/sepfm/debug_image" not in reader.topics:
+            return False
+        for raw in reader.messages(["/sepfm/debug_image"]):
+            msg = deserialize_message(raw.data, Image)
+            s = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            if best is None or abs(s - stamp_ns) < abs(best[0] - stamp_ns):
+                best = (s, msg)
+    if best is None:
+        return False
+    return bool(cv2.imwrite(str(path), message_to_numpy(best[1], "bgr8")))
+
+
+def main(argv: list[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog="sepfm_ros demo",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--bag", type=Path, help=f"bag to replay (default: bundled {DEFAULT_BAG})")
+    parser.add_argument("--out", type=Path, help="output folder (default results/demo-<time>)")
+    parser.add_argument("--rate", type=float, default=1.0, help="replay speed (default 1)")
+    parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE")
+    parser.add_argument("--quiet", action="store_true", help="no progress line")
+    args = parser.parse_args(argv)
+    try:
+        bag = args.bag or bundled_bags_dir() / DEFAULT_BAG
+        out = args.out or Path("results") / time.strftime("demo-%Y%m%d-%H%M%S")
+        check_output_path(out)
+        out.mkdir(parents=True)
+        isolate_ros_environment()
+        print(
+            f"replaying {bag} through the live sepfm node"
+            f" (ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']})"
+        )
+        run = replay_through_node(
+            bag,
+            out / "live",
+            args.param,
+            args.rate,
+            progress=not args.quiet,
+            log_path=out / "node.log",
+        )
+        from sepfm_ros.ros.results import format_summary, format_table, read_results, summarize
+
+        results = read_results(run.output, gt_bag=bag)
+    except BagError as err:
+        print(f"sepfm_ros demo: error: {err}", file=sys.stderr)
+        return 1
+    print(format_table(results))
+    print(format_summary(summarize(results, run.expected_pairs)))
+    if results:
+        ranked = sorted(results, key=lambda r: r.inliers)
+        pick = ranked[len(ranked) // 2]
+        png = out / "debug.png"
+        if write_debug_image(run.output, pick.stamp_ns, png):
+            print(f"debug image (inliers, line pair, epipolar lines): {png}")
+    print(f"outputs recorded in {run.output}; node log {out / 'node.log'}")
+    return 0 if results else 1

@@ -1,0 +1,314 @@
+"""``sepfm_ros replay BAG``: publish a bag into live topics with its recorded timing.
+
+Like ``ros2 bag play`` (not available from PyPI): messages are published as the recorded CDR
+bytes, unchanged, at their recorded log times scaled by ``--rate``, with the QoS the recorder saw
+offered (reliability, durability, history depth). ``--topics`` selects topics, ``--remap
+FROM:=TO`` renames them, ``--start-offset S`` skips the first S seconds, ``--loop`` repeats, and
+``--clock`` publishes ``/clock`` (rosgraph_msgs/Clock) with the bag's time so nodes with
+``use_sim_time:=true`` follow it. ``--wait-for TOPIC`` waits until TOPIC has a subscriber before
+starting (useful when a node is still starting up). A progress line runs on stderr.
+
+Bad input (missing bag, corrupt or truncated storage, unknown topic or message type, header
+stamps that repeat or go backwards) gives a message and exit code 1, before anything is published.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import signal
+import sys
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from rclpy.node import Node
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
+from tqdm import tqdm
+
+from sepfm_ros.ros.bag_io import (
+    BagError,
+    BagReader,
+    StampChecker,
+    TopicNotFoundError,
+    UnknownTypeError,
+    has_header,
+    header_stamp_ns,
+)
+
+
+def message_class(msgtype: str) -> Any:
+    """The rclpy message class of ``pkg/msg/Name`` (UnknownTypeError when not importable)."""
+    parts = msgtype.split("/")
+    if len(parts) != 3 or parts[1] != "msg":
+        raise UnknownTypeError(f"unsupported message type name {msgtype!r}")
+    try:
+        module = importlib.import_module(f"{parts[0]}.msg")
+        return getattr(module, parts[2])
+    except (ImportError, AttributeError):
+        raise UnknownTypeError(
+            f"message type {msgtype} is not installed in this Python environment"
+        ) from None
+
+
+def qos_from_recorded(profiles: Sequence[Qos]) -> QoSProfile:
+    """The rclpy QoS to publish with, from the profiles offered when recording.
+
+    Reliable unless every recorded publisher was best effort; transient local only when every
+    one was; depth the largest recorded KEEP_LAST depth (default 10).
+    """
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    if not profiles:
+        return qos
+    if all(p.reliability == QosReliability.BEST_EFFORT for p in profiles):
+        qos.reliability = ReliabilityPolicy.BEST_EFFORT
+    if all(p.durability == QosDurability.TRANSIENT_LOCAL for p in profiles):
+        qos.durability = DurabilityPolicy.TRANSIENT_LOCAL
+    depths = [p.depth for p in profiles if p.history == QosHistory.KEEP_LAST and p.depth > 0]
+    if depths:
+        qos.history = HistoryPolicy.KEEP_LAST
+        qos.depth = max(depths)
+    return qos
+
+
+def parse_remaps(items: Sequence[str]) -> dict[str, str]:
+    """``FROM:=TO`` strings -> {from: to} (topic names made absolute)."""
+    out = {}
+    for item in items:
+        if ":=" not in item:
+            raise BagError(f"remap {item!r} is not of the form FROM:=TO")
+        src, dst = item.split(":=", 1)
+        out[absolute_topic(src)] = absolute_topic(dst)
+    return out
+
+
+def absolute_topic(topic: str) -> str:
+    return topic if topic.startswith("/") else "/" + topic
+
+
+class Replayer:
+    """Publishes a bag's messages on ``node`` with their recorded timing.
+
+    Args:
+        node: the rclpy node that owns the publishers (it need not be spun).
+        bag: bag path.
+        topics: topics to play (all when empty).
+        remap: recorded topic -> published topic.
+        rate: playback speed factor (> 0).
+        start_offset_s: skip this many seconds from the bag's start.
+        loop: play again from the start after the end (until :meth:`stop`).
+        clock: publish /clock with the bag's time at ``clock_hz``.
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        bag: str | Path,
+        topics: Sequence[str] = (),
+        remap: dict[str, str] | None = None,
+        rate: float = 1.0,
+        start_offset_s: float = 0.0,
+        loop: bool = False,
+        clock: bool = False,
+        clock_hz: float = 100.0,
+    ) -> None:
+        if not rate > 0:
+            raise BagError(f"--rate must be > 0, got {rate}")
+        if start_offset_s < 0:
+            raise BagError(f"--start-offset must be >= 0, got {start_offset_s}")
+        self.node = node
+        self.reader = BagReader(bag)
+        self.rate = float(rate)
+        self.loop = loop
+        self.remap = dict(remap or {})
+        self._stop = threading.Event()
+        wanted = [absolute_topic(t) for t in topics] or sorted(self.reader.topics)
+        for t in wanted:
+            self.reader.require(t)
+        self.topics = wanted
+        self.reader.check_known_types(wanted)
+        self._check_stamps()
+        self.start_ns = self.reader.start_time_ns + int(round(start_offset_s * 1e9))
+        self.publishers = {}
+        for t in wanted:
+            info = self.reader.topics[t]
+            cls = message_class(info.msgtype)
+            self.publishers[t] = node.create_publisher(
+                cls, self.remap.get(t, t), qos_from_recorded(info.qos)
+            )
+        self.total = sum(1 for m in self.reader.messages(wanted) if m.log_time_ns >= self.start_ns)
+        self._clock_pub = None
+        self._clock_hz = clock_hz
+        self._bag_now_ns = self.start_ns
+        if clock:
+            from rosgraph_msgs.msg import Clock
+
+            self._clock_cls = Clock
+            self._clock_pub = node.create_publisher(
+                Clock, "/clock", QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
+            )
+
+    def _check_stamps(self) -> None:
+        checker = StampChecker()
+        with_header = [t for t in self.topics if has_header(self.reader.topics[t].msgtype)]
+        for i, msg in enumerate(self.reader.messages(with_header)):
+            checker.check(msg.topic, header_stamp_ns(msg.data), i)
+
+    def wait_for_subscribers(self, topics: Sequence[str], timeout_s: float) -> None:
+        """Wait until every (published, i.e. remapped) topic in ``topics`` has a subscriber."""
+        pubs = {p.topic_name: p for p in self.publishers.values()}
+        missing = [absolute_topic(t) for t in topics if absolute_topic(t) not in pubs]
+        if missing:
+            raise TopicNotFoundError(f"--wait-for topics not published from the bag: {missing}")
+        deadline = time.monotonic() + timeout_s
+        while not self._stop.is_set():
+            waiting = [t for t in topics if pubs[absolute_topic(t)].get_subscription_count() == 0]
+            if not waiting:
+                return
+            if time.monotonic() > deadline:
+                raise BagError(f"no subscriber on {', '.join(waiting)} after {timeout_s:.0f} s")
+            time.sleep(0.05)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def _clock_loop(self, base_wall: list[float]) -> None:
+        period = 1.0 / self._clock_hz
+        while not self._stop.is_set():
+            now = self.start_ns + int((time.monotonic() - base_wall[0]) * self.rate * 1e9)
+            msg = self._clock_cls()
+            msg.clock.sec, msg.clock.nanosec = divmod(max(now, 0), 1_000_000_000)
+            self._clock_pub.publish(msg)
+            time.sleep(period)
+
+    def run(self, progress: bool = True) -> int:
+        """Play (blocking); returns the number of messages published."""
+        published = 0
+        base_wall = [time.monotonic()]
+        clock_thread = None
+        if self._clock_pub is not None:
+            clock_thread = threading.Thread(target=self._clock_loop, args=(base_wall,), daemon=True)
+            clock_thread.start()
+        bar = tqdm(
+            total=self.total,
+            unit="msg",
+            desc=f"replay {self.reader.path.name} x{self.rate:g}",
+            file=sys.stderr,
+            disable=not progress,
+            dynamic_ncols=True,
+        )
+        try:
+            while not self._stop.is_set():
+                base_wall[0] = time.monotonic()
+                for msg in self.reader.messages(self.topics, start_ns=self.start_ns):
+                    target = base_wall[0] + (msg.log_time_ns - self.start_ns) / 1e9 / self.rate
+                    while not self._stop.is_set():
+                        delay = target - time.monotonic()
+                        if delay <= 0:
+                            break
+                        time.sleep(min(delay, 0.05))
+                    if self._stop.is_set():
+                        break
+                    self.publishers[msg.topic].publish(msg.data)
+                    published += 1
+                    bar.update(1)
+                    bar.set_postfix_str(
+                        f"t={(msg.log_time_ns - self.reader.start_time_ns) / 1e9:.2f}s",
+                        refresh=False,
+                    )
+                if not self.loop:
+                    break
+                bar.reset()
+        finally:
+            self._stop.set()
+            bar.close()
+            if clock_thread is not None:
+                clock_thread.join(timeout=1.0)
+        return published
+
+    def close(self) -> None:
+        self.reader.close()
+        for pub in self.publishers.values():
+            self.node.destroy_publisher(pub)
+
+
+def raise_keyboard_interrupt(signum: int, frame: Any) -> None:
+    """A SIGTERM handler: stop like Ctrl-C (so outputs are closed cleanly)."""
+    raise KeyboardInterrupt
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    p = argparse.ArgumentParser(
+        prog="sepfm_ros replay",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument("bag", type=Path)
+    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
+    p.add_argument("--loop", action="store_true", help="repeat until interrupted")
+    p.add_argument("--start-offset", type=float, default=0.0, metavar="S", help="skip S seconds")
+    p.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="topics to play")
+    p.add_argument("--remap", nargs="+", default=[], metavar="FROM:=TO", help="rename topics")
+    p.add_argument("--clock", action="store_true", help="publish /clock with the bag's time")
+    p.add_argument("--clock-hz", type=float, default=100.0, help="/clock rate (default 100)")
+    p.add_argument(
+        "--wait-for",
+        nargs="+",
+        default=[],
+        metavar="TOPIC",
+        help="wait for a subscriber on these (published) topics before playing",
+    )
+    p.add_argument("--wait-timeout", type=float, default=30.0, help="seconds (default 30)")
+    p.add_argument("--quiet", action="store_true", help="no progress line")
+    return p.parse_args(argv)
+
+
+def main(argv: list[str]) -> int:
+    import rclpy
+    from rclpy.utilities import remove_ros_args
+
+    args = _parse(remove_ros_args(["replay", *argv])[1:])
+    try:
+        remap = parse_remaps(args.remap)
+        BagReader(args.bag).close()  # fail fast on a bad bag, before DDS starts
+    except BagError as err:
+        print(f"sepfm_ros replay: error: {err}", file=sys.stderr)
+        return 1
+    rclpy.init(args=["replay", *argv])
+    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    node = rclpy.create_node("sepfm_replay")
+    replayer = None
+    try:
+        replayer = Replayer(
+            node,
+            args.bag,
+            args.topics,
+            remap,
+            args.rate,
+            args.start_offset,
+            args.loop,
+            args.clock,
+            args.clock_hz,
+        )
+        if args.wait_for:
+            replayer.wait_for_subscribers(args.wait_for, args.wait_timeout)
+        n = replayer.run(progress=not args.quiet)
+        print(f"replayed {n} messages from {args.bag}", file=sys.stderr)
+        return 0
+    except BagError as err:
+        print(f"sepfm_ros replay: error: {err}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        if replayer is not None:
+            replayer.stop()
+        print("sepfm_ros replay: interrupted", file=sys.stderr)
+        return 130
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+        if replayer is not None:
+            replayer.close()
+        node.destroy_node()
+        rclpy.try_shutdown()

@@ -24,9 +24,14 @@ from sepfm_ros.geometry.epipolar import normalize_fundamental, symmetric_epipola
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import Correspondences, FundamentalProblem
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
-from sepfm_ros.geometry.line_pairs import LineSearchOptions, find_line_pairs, working_scale
+from sepfm_ros.geometry.line_pairs import (
+    LineSearchOptions,
+    find_line_pairs,
+    line_parameter,
+    working_scale,
+)
 from sepfm_ros.geometry.ransac import RaceOptions, run_ransac
-from sepfm_ros.geometry.refine import fit_least_squares, refine_sampson
+from sepfm_ros.geometry.refine import iterative_refit
 
 # method -> (separable?, solver, scoring)
 _METHODS: dict[str, tuple[bool, str, str]] = {
@@ -39,6 +44,7 @@ _METHODS: dict[str, tuple[bool, str, str]] = {
     "lmeds7": (False, "seven", "lmeds"),
 }
 METHODS = tuple(_METHODS)
+TRIPLES = ("raw", "synthesized", "all")
 
 _DEFAULTS: dict[str, Any] = {
     "max_samples": 10000,  # cap on RANSAC samples (stage 2 / standard), all arms together
@@ -110,7 +116,7 @@ def _dominant_plane(p1: np.ndarray, p2: np.ndarray, threshold: float, ratio: flo
     """Flag F whose inliers are mostly explained by one homography (F is then unreliable)."""
     if len(p1) < 8:
         return None
-    H, mask = cv2.findHomography(p1, p2, cv2.RANSAC, 2.0 * threshold, maxIters=500, confidence=0.99)
+    H, mask = cv2.findHomography(p1, p2, cv2.RANSAC, 2.0 * threshold, maxIters=200, confidence=0.99)
     if H is None or mask is None:
         return None
     share = float(mask.ravel().astype(bool).mean())
@@ -120,10 +126,14 @@ def _dominant_plane(p1: np.ndarray, p2: np.ndarray, threshold: float, ratio: flo
 
 
 def _triples(fit: LineHomographyFit, p1: np.ndarray, p2: np.ndarray, kind: str):
-    """The 3 fixed correspondences for stage 2: the H_e inliers at min, median and max t."""
-    from sepfm_ros.geometry.line_pairs import line_parameter
+    """The fixed line correspondences of stage 2.
 
+    ``raw``: the H_e inliers at min, median and max t; ``synthesized``: exact correspondences
+    from the refined H_e at those t; ``all``: every H_e inlier (a least-squares block).
+    """
     inl = fit.inliers
+    if kind == "all":
+        return p1[inl], p2[inl]
     t = line_parameter(p1[inl], fit.ctrl1)
     order = np.argsort(t)
     pick = inl[order[[0, len(order) // 2, -1]]]
@@ -169,8 +179,8 @@ def estimate_fundamental(
         raise ValueError(f"threshold must be positive, got {threshold}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    if opt["triple"] not in ("raw", "synthesized"):
-        raise ValueError(f"triple must be 'raw' or 'synthesized', got {opt['triple']!r}")
+    if opt["triple"] not in TRIPLES:
+        raise ValueError(f"triple must be one of {TRIPLES}, got {opt['triple']!r}")
     separable, solver, scoring = _METHODS[method]
     min_points = 7 if solver == "seven" else 8
     size1 = _validate_size(image_size1, "image_size1")
@@ -268,7 +278,9 @@ def estimate_fundamental(
         est.status = "no model: every sample was degenerate"
         est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
         return est
-    F = _final_model(F, p1, p2, threshold, scoring, bool(opt["refine"]))
+    F, refits = _final_model(F, p1, p2, threshold, bool(opt["refine"]))
+    est.stage2_hypotheses += refits  # final refits are scored against all matches too
+    est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
     est.inliers = symmetric_epipolar_distance(F, p1, p2) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
@@ -286,28 +298,15 @@ def estimate_fundamental(
 
 
 def _final_model(
-    F: np.ndarray, p1: np.ndarray, p2: np.ndarray, threshold: float, scoring: str, refine: bool
-) -> np.ndarray:
-    """Refit on all inliers (normalised eight-point), then optional Sampson refinement.
+    F: np.ndarray, p1: np.ndarray, p2: np.ndarray, threshold: float, refine: bool
+) -> tuple[np.ndarray, int]:
+    """Refit on all inliers (normalised eight-point), optionally Sampson-refined, rank 2.
 
-    A refit is kept only if it does not increase the robust cost (MSAC); rank 2 is enforced.
+    Returns (F, number of refitted models scored). A refit replaces F only if it lowers the
+    MSAC cost at ``threshold`` (see :func:`iterative_refit`).
     """
-
-    def cost(G: np.ndarray) -> float:
-        d = symmetric_epipolar_distance(G, p1, p2)
-        return float(np.minimum(d * d, threshold * threshold).sum())
-
-    best, best_cost = normalize_fundamental(F), cost(F)
-    # inlier sets from a shrinking threshold (as in LO-RANSAC's iterative step) let the refit
-    # escape a model that sits slightly off the true one; a refit is kept only if it is better
-    for factor in (3.0, 2.0, 1.5, 1.0, 1.0, 1.0):
-        inl = symmetric_epipolar_distance(best, p1, p2) < factor * threshold
-        if np.count_nonzero(inl) < 8:
-            continue
-        G = fit_least_squares(p1[inl], p2[inl])
-        if refine:
-            G = refine_sampson(G, p1[inl], p2[inl])
-        c = cost(G)
-        if c < best_cost:
-            best, best_cost = normalize_fundamental(G), c
-    return best
+    fitted = iterative_refit(F, p1, p2, threshold, irls_iterations=5 if refine else 0)
+    candidates = [F, *fitted]
+    d = symmetric_epipolar_distance(np.stack(candidates), p1, p2)
+    cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
+    return normalize_fundamental(candidates[int(np.argmin(cost))]), len(fitted)

@@ -17,7 +17,7 @@ from sepfm_ros.geometry.epipolar import (
     normalization_transform,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.refine import fit_least_squares, refine_sampson
+from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers import eight_point, seven_point
 
 SCORINGS = ("msac", "lmeds")
@@ -68,7 +68,9 @@ class FundamentalProblem:
         solver: "seven" (seven-point, k = 7 - f) or "eight" (eight-point, k = 8 - f).
         threshold: inlier threshold in px of symmetric epipolar distance.
         scoring: "msac" or "lmeds".
-        fixed1, fixed2: (f, 2) pixel correspondences kept in every sample (f = 0 or 3).
+        fixed1, fixed2: (f, 2) pixel correspondences kept in every sample: none, the paper's 3
+            line correspondences, or all line correspondences (f >= 3) as a least-squares block
+            that fixes the same 3 degrees of freedom with the noise averaged.
         pool: indices of ``data`` eligible for sampling (default: all).
     """
 
@@ -90,7 +92,7 @@ class FundamentalProblem:
         self.solver = solver
         self.threshold = float(threshold)
         self.scoring = scoring
-        f = 0 if fixed1 is None else len(fixed1)
+        f = 0 if fixed1 is None else min(3, len(fixed1))  # DOF fixed by line points
         self.f1 = np.zeros((0, 2)) if fixed1 is None else apply_transform(data.T1, fixed1)
         self.f2 = np.zeros((0, 2)) if fixed2 is None else apply_transform(data.T2, fixed2)
         self.sample_size = (7 if solver == "seven" else 8) - f
@@ -122,14 +124,8 @@ class FundamentalProblem:
         return score_distances(self.distances(models), self.threshold, self.scoring)
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
-        """Least-squares refit on the inliers of ``model``, then a Sampson (IRLS) refinement."""
-        inl = self.distances(model[None])[0] < self.threshold
-        if np.count_nonzero(inl) < 8:
-            return np.zeros((0, 3, 3))
-        p1, p2 = self.data.pts1, self.data.pts2
-        F1 = fit_least_squares(p1[inl], p2[inl])
-        inl1 = self.distances(F1[None])[0] < self.threshold
-        if np.count_nonzero(inl1) < 8:
-            return F1[None]
-        F2 = refine_sampson(F1, p1[inl1], p2[inl1], iterations=3)
-        return np.stack([F1, F2])
+        """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
+        fitted = iterative_refit(
+            model, self.data.pts1, self.data.pts2, self.threshold, irls_iterations=2
+        )
+        return np.stack(fitted) if fitted else np.zeros((0, 3, 3))

@@ -3,7 +3,8 @@ joint accumulator A(m, n) = number of correspondences whose point in image 1 lie
 whose point in image 2 lies on line n.
 
 The paper's accumulator is N x K1 x K2; summed over the correspondences it is the product of the
-two point-line incidence matrices, A = I1^T I2 (K1 x K2), which is what we compute.
+two point-line incidence matrices, A = I1^T I2 (K1 x K2), which we compute sparsely from the
+(correspondence, line, line) incidences (see :func:`joint_incidences`).
 """
 
 from __future__ import annotations
@@ -114,24 +115,50 @@ def find_line_pairs(
         return []
     I1 = incidence(pts1, L1, image_size1, opts)
     I2 = incidence(pts2, L2, image_size2, opts)
-    A = I1.T.astype(np.float32) @ I2.astype(np.float32)  # (K1, K2) joint accumulator
-    flat = A.ravel()
-    cand = np.flatnonzero(flat >= opts.min_votes)
+    key, corr = joint_incidences(I1, I2)
+    A = np.bincount(key, minlength=len(L1) * len(L2))  # the joint accumulator, flattened
+    cand = np.flatnonzero(A >= opts.min_votes)
     if cand.size == 0:
         return []
-    cand = cand[np.argsort(-flat[cand], kind="stable")][: 50 * opts.max_pairs]
+    cand = cand[np.argsort(-A[cand], kind="stable")][: 20 * opts.max_pairs]
     chosen: list[LinePair] = []
-    used = np.zeros(len(pts1), dtype=np.int64)  # how many chosen supports each match is in
+    used = np.zeros(len(pts1), dtype=bool)  # matches already in a chosen support
     for c in cand:
-        i, j = divmod(int(c), A.shape[1])
-        support = np.flatnonzero(I1[:, i] & I2[:, j])
+        support = corr[key == c]
         if np.count_nonzero(used[support]) * 2 > len(support):
             continue
+        i, j = divmod(int(c), len(L2))
         chosen.append(LinePair(L1[i], L2[j], support))
-        used[support] += 1
+        used[support] = True
         if len(chosen) >= opts.max_pairs:
             break
     return chosen
+
+
+def joint_incidences(I1: np.ndarray, I2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every (correspondence, line m, line n) with the point in image 1 on m and in image 2 on n.
+
+    This is the sparse form of the paper's N x K1 x K2 accumulator: a correspondence on d1 lines
+    in image 1 and d2 in image 2 contributes d1 * d2 entries, never K1 * K2.
+
+    Args:
+        I1: (N, K1) bool incidence in image 1. I2: (N, K2) bool incidence in image 2.
+    Returns:
+        (key, corr): (E,) flat accumulator index m * K2 + n and (E,) correspondence index j.
+    """
+    j1, m = np.nonzero(I1)  # row-major: sorted by correspondence
+    j2, n = np.nonzero(I2)
+    N, K2 = I1.shape[0], I2.shape[1]
+    c2 = np.bincount(j2, minlength=N)
+    start2 = np.cumsum(c2) - c2
+    rep = c2[j1]
+    total = int(rep.sum())
+    if total == 0:
+        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
+    j_rep = np.repeat(j1, rep)
+    offset = np.arange(total) - np.repeat(np.cumsum(rep) - rep, rep)
+    n_rep = n[start2[j_rep] + offset]
+    return np.repeat(m, rep).astype(np.int64) * K2 + n_rep, j_rep
 
 
 def control_points(line: np.ndarray, image_size: tuple[float, float]) -> np.ndarray:

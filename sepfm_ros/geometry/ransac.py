@@ -157,6 +157,9 @@ def run_ransac(
     pool: list[Problem] = []
     samples: list[int] = []
     arm_best: list[int] = []  # best inlier count per arm
+    arm_model: list[Any] = []  # best minimal-sample model per arm, and its cost
+    arm_cost: list[float] = []
+    arm_checked: list[bool] = []  # arm's best model was locally optimised before a drop
     active: list[int] = []
     dropped: list[int] = []
 
@@ -167,15 +170,33 @@ def run_ransac(
         pool.append(arm)
         samples.append(0)
         arm_best.append(-1)
+        arm_model.append(None)
+        arm_cost.append(np.inf)
+        arm_checked.append(False)
         active.append(len(pool) - 1)
         return True
 
     join()
     best_model, best_cost, best_count, leader = None, np.inf, -1, -1
+    best_raw_cost = np.inf
+    hypotheses = 0
+
+    def local_optimization(a: int, model: Any) -> None:
+        """LO-RANSAC step from ``model`` of arm ``a``; updates the best model and arm_best."""
+        nonlocal best_model, best_cost, best_count, leader, hypotheses
+        lo = pool[a].local_optimize(model)
+        if not len(lo):
+            return
+        lcost, lcount = pool[a].score(lo)
+        hypotheses += len(lo)
+        j = int(np.argmin(lcost))
+        arm_best[a] = max(arm_best[a], int(lcount.max()))
+        if lcost[j] < best_cost:
+            best_model, best_cost, best_count, leader = lo[j], float(lcost[j]), int(lcount[j]), a
+
     if initial is not None and pool:
         best_model, best_cost, best_count = initial
         leader = 0
-    hypotheses = 0
     total = 0
     n_join = 0
     next_join = race.add_after[0] if race.add_after else max_samples
@@ -204,6 +225,8 @@ def run_ransac(
             hypotheses += len(models)
             i = int(np.argmin(cost))
             arm_best[a] = max(arm_best[a], int(count.max()))
+            if cost[i] < arm_cost[a]:
+                arm_model[a], arm_cost[a] = models[i], float(cost[i])
             if cost[i] < best_cost:
                 best_model, best_cost, best_count, leader = (
                     models[i],
@@ -211,15 +234,13 @@ def run_ransac(
                     int(count[i]),
                     a,
                 )
-                # local optimisation of the new best (LO-RANSAC)
-                lo = arm.local_optimize(best_model)
-                if len(lo):
-                    lcost, lcount = arm.score(lo)
-                    hypotheses += len(lo)
-                    j = int(np.argmin(lcost))
-                    if lcost[j] < best_cost:
-                        best_model, best_cost, best_count = lo[j], float(lcost[j]), int(lcount[j])
-                arm_best[a] = max(arm_best[a], best_count)
+            # LO-RANSAC: optimise every minimal-sample model that beats the best minimal-sample
+            # model so far. Comparing with the best *refined* model instead would starve LO when
+            # minimal samples are badly conditioned (fixed line points), as their raw support
+            # then stays below a refined wrong-basin model's.
+            if cost[i] < best_raw_cost:
+                best_raw_cost = float(cost[i])
+                local_optimization(a, models[i])
         # adaptive stopping on the leading arm
         if leader >= 0:
             arm = pool[leader]
@@ -229,16 +250,23 @@ def run_ransac(
                 break
         if total >= max_samples:
             break
-        # racing: drop lagging arms, let the next arm join on schedule
+        # racing: drop lagging arms (after one local optimisation of their best model, since a
+        # minimal sample with fixed line points is often badly conditioned), let the next join
         if len(pool) > 1 and best_count > 0:
             for a in list(active):
                 if a == leader or arm_best[a] >= race.drop_ratio * best_count:
                     continue
                 w = min(1.0, best_count / pool[a].n)
                 p_good = w ** pool[a].sample_size
-                if samples[a] >= np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)):
-                    active.remove(a)
-                    dropped.append(a)
+                if samples[a] < np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)):
+                    continue
+                if not arm_checked[a] and arm_model[a] is not None:
+                    arm_checked[a] = True
+                    local_optimization(a, arm_model[a])
+                    if a == leader or arm_best[a] >= race.drop_ratio * best_count:
+                        continue
+                active.remove(a)
+                dropped.append(a)
         if total >= next_join or not active:
             if join():
                 n_join += 1

@@ -14,17 +14,22 @@ _VANDER_INV = np.linalg.inv(np.vander(_S, 4))  # rows: s^3, s^2, s, 1
 def seven_point(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """All real-root F of M seven-point samples.
 
+    With K > 7 correspondences per sample the two-dimensional null space is the least-squares
+    one (the two smallest right singular vectors), which is exact when the rows have rank 7,
+    e.g. 4 general points plus any number of points on one 3D line (they give 3 constraints).
+
     Args:
-        x1, x2: (M, 7, 2) correspondences (normalised coordinates recommended).
+        x1, x2: (M, K, 2) correspondences, K >= 7 (normalised coordinates recommended).
     Returns:
         (F, sample): F (K, 3, 3) unit-norm models, K <= 3M; sample (K,) int index of the sample
         each model came from.
     """
-    if x1.ndim != 3 or x1.shape[1] != 7:
-        raise ValueError(f"seven_point expects (M, 7, 2) inputs, got {x1.shape}")
-    M = x1.shape[0]
-    A = epipolar_rows(x1, x2)  # (M, 7, 9)
-    A = np.concatenate([A, np.zeros((M, 2, 9))], axis=1)  # square up for a full SVD
+    if x1.ndim != 3 or x1.shape[1] < 7:
+        raise ValueError(f"seven_point expects (M, K >= 7, 2) inputs, got {x1.shape}")
+    M, K = x1.shape[:2]
+    A = epipolar_rows(x1, x2)  # (M, K, 9)
+    if K < 9:
+        A = np.concatenate([A, np.zeros((M, 9 - K, 9))], axis=1)  # square up for a full SVD
     _, _, Vt = np.linalg.svd(A)
     F1 = Vt[:, -1].reshape(M, 3, 3)
     F2 = Vt[:, -2].reshape(M, 3, 3)

@@ -11,6 +11,10 @@ import csv
 import json
 import math
 import shutil
+import signal
+import subprocess
+import sys
+import time
 from pathlib import Path
 
 import cv2
@@ -300,3 +304,28 @@ def test_registry_holds_every_method_of_the_issue():
     expected = {"sep4", "sep5", "sep4-lmeds", "sep5-lmeds", "ransac7", "ransac8", "lmeds7",
                 "cv-ransac", "cv-lmeds", "cv-magsac", "cv-accurate", "poselib"}  # fmt: skip
     assert set(REGISTRY) == expected
+
+
+def test_ctrl_c_keeps_a_partial_report_of_whole_pairs(tmp_path):
+    manifest = tmp_path / "m.json"
+    manifest.write_text(json.dumps([synthetic_entry(s) for s in range(40)]))
+    out = tmp_path / "out"
+    cmd = [sys.executable, "-m", "sepfm_ros", "eval", "--manifest", str(manifest), "--out",
+           str(out), "--cache", "none", "--methods", "all", "--seeds", "0,1,2"]  # fmt: skip
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    first = proc.stderr.readline()  # printed once the pairs are loaded, before the runs start
+    assert "40 pairs x" in first, first
+    time.sleep(3.0)  # the whole run takes far longer
+    assert proc.poll() is None, "finished before it could be interrupted"
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "interrupted; partial report" in err
+    report = (out / "report.md").read_text()
+    assert "**Interrupted** after" in report
+    runs = _read_csv(out / "runs.csv")
+    per_pair: dict[str, int] = {}
+    for r in runs:
+        per_pair[r["pair"]] = per_pair.get(r["pair"], 0) + 1
+    assert 0 < len(per_pair) < 40
+    assert set(per_pair.values()) == {len(available_methods()) * 3}  # whole pairs only

@@ -192,11 +192,20 @@ def main(argv: list[str]) -> int:
         res = evaluate(pairs, methods, cache, config, errors=errors, progress=progress)
     elapsed = time.perf_counter() - t0
     command = "sepfm_ros eval " + shlex.join(argv)
+    n_runs = len(res.runs)
     notes = (
-        f"Run time: {elapsed:.0f} s for {total} runs on this machine "
+        f"Run time: {elapsed:.0f} s for {n_runs} runs on this machine "
         f"(including matching uncached pairs)."
     )
+    if res.interrupted:
+        notes = (
+            f"**Interrupted** after {len(res.pairs)} of {len(pairs)} pairs: the tables cover "
+            f"those pairs only. {notes}"
+        )
     report = write_report(res, args.out, command=command, notes=notes)
+    if res.interrupted:
+        print(f"sepfm_ros eval: interrupted; partial report: {report}", file=sys.stderr)
+        return 130
     if args.readme is not None:
         try:
             update_readme(args.readme, res, command)

@@ -60,6 +60,7 @@ class EvalResults:
         line_errors_est / line_errors_gt: scene -> line homography errors (px) of the line
             inliers under the estimated F and under the GT F, first separable method, all seeds.
         examples: scene -> Example (first evaluated pair of the scene, first seed).
+        interrupted: the run was stopped (Ctrl-C); only whole pairs are kept.
     """
 
     config: EvalConfig
@@ -71,6 +72,7 @@ class EvalResults:
     line_errors_est: dict[str, list[float]] = field(default_factory=dict)
     line_errors_gt: dict[str, list[float]] = field(default_factory=dict)
     examples: dict[str, Example] = field(default_factory=dict)
+    interrupted: bool = False
 
 
 def _safe_run(method: Method, pts_a, pts_b, size_a, size_b, cfg: EvalConfig, seed: int):
@@ -79,6 +81,82 @@ def _safe_run(method: Method, pts_a, pts_b, size_a, size_b, cfg: EvalConfig, see
     except Exception as exc:  # a method that raises is a failed run, not a crashed evaluation
         hyp = None if method.family == "opencv" else 0
         return MethodResult(None, 0, hyp, hyp, hyp, math.nan, status=f"error: {exc!r}")
+
+
+def _evaluate_pair(
+    res: EvalResults,
+    pair: PairSpec,
+    methods: Sequence[Method],
+    cache: MatchesCache,
+    progress: Callable[[int, str], None] | None,
+) -> None:
+    """Match one pair and run every method x seed on it, appending to ``res``."""
+    cfg = res.config
+    steps_per_pair = len(methods) * len(cfg.seeds)
+    line_method = next((m.name for m in methods if m.separable), None)
+    try:
+        pm = cache.matches(pair)
+        n = pm.pts_a.shape[0]
+        if n < MIN_MATCHES:
+            raise PairDataError(
+                f"fewer than {MIN_MATCHES} matches ({n} with {cache.settings.features}, "
+                f"ratio {cache.settings.ratio}): nothing to estimate from"
+            )
+    except PairDataError as exc:
+        res.errors.append(PairError(pair.pair_id, pair.scene, str(exc)))
+        if progress:
+            progress(steps_per_pair, pair.pair_id)
+        return
+    except Exception as exc:  # e.g. cv2.error on a corrupt image
+        res.errors.append(PairError(pair.pair_id, pair.scene, f"matching failed: {exc!r}"))
+        if progress:
+            progress(steps_per_pair, pair.pair_id)
+        return
+    size_b = pm.size_b or pm.size_a
+    positive = metrics.positives(pair.F_gt, pm.pts_a, pm.pts_b)
+    n_pos = int(np.count_nonzero(positive))
+    res.pairs.append(
+        {
+            "pair": pair.pair_id,
+            "scene": pair.scene,
+            "kind": pair.kind,
+            "baseline": pair.baseline,
+            "n_matches": n,
+            "n_positives": n_pos,
+            "outlier_rate": metrics.outlier_rate(n_pos, n),
+            "cached": pm.from_cache,
+        }
+    )
+    for method in methods:
+        for seed in cfg.seeds:
+            r = _safe_run(method, pm.pts_a, pm.pts_b, pm.size_a, size_b, cfg, seed)
+            m = metrics.run_metrics(r.F, pm.pts_a, pm.pts_b, positive, cfg.threshold)
+            rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
+            rec["seed"] = seed
+            rec.update(asdict(m))
+            rec.update(
+                has_model=r.F is not None,
+                hypotheses=r.hypotheses,
+                stage1_hypotheses=r.stage1_hypotheses,
+                stage2_hypotheses=r.stage2_hypotheses,
+                ms=r.ms,
+                own_inliers=r.own_inliers,
+                status=r.status,
+                fallback=r.fallback,
+                line_inliers=len(r.line_inliers) if method.separable else None,
+            )
+            res.runs.append(rec)
+            if method.separable and r.line_pair is not None and len(r.line_inliers):
+                res.line_inliers.append((method.name, len(r.line_inliers)))
+                if method.name == line_method:
+                    _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair)
+            if pair.scene not in res.examples and seed == cfg.seeds[0]:
+                if method.name == (line_method or methods[0].name):
+                    res.examples[pair.scene] = Example(
+                        pair, pm.pts_a, pm.pts_b, positive, method.name, r
+                    )
+            if progress:
+                progress(1, pair.pair_id)
 
 
 def evaluate(
@@ -102,72 +180,17 @@ def evaluate(
     """
     cfg = config or EvalConfig()
     res = EvalResults(config=cfg, methods=[m.name for m in methods], errors=list(errors))
-    steps_per_pair = len(methods) * len(cfg.seeds)
-    line_method = next((m.name for m in methods if m.separable), None)
-    for pair in pairs:
-        try:
-            pm = cache.matches(pair)
-            n = pm.pts_a.shape[0]
-            if n < MIN_MATCHES:
-                raise PairDataError(
-                    f"fewer than {MIN_MATCHES} matches ({n} with {cache.settings.features}, "
-                    f"ratio {cache.settings.ratio}): nothing to estimate from"
-                )
-        except PairDataError as exc:
-            res.errors.append(PairError(pair.pair_id, pair.scene, str(exc)))
-            if progress:
-                progress(steps_per_pair, pair.pair_id)
-            continue
-        except Exception as exc:  # e.g. cv2.error on a corrupt image
-            res.errors.append(PairError(pair.pair_id, pair.scene, f"matching failed: {exc!r}"))
-            if progress:
-                progress(steps_per_pair, pair.pair_id)
-            continue
-        size_b = pm.size_b or pm.size_a
-        positive = metrics.positives(pair.F_gt, pm.pts_a, pm.pts_b)
-        n_pos = int(np.count_nonzero(positive))
-        res.pairs.append(
-            {
-                "pair": pair.pair_id,
-                "scene": pair.scene,
-                "kind": pair.kind,
-                "baseline": pair.baseline,
-                "n_matches": n,
-                "n_positives": n_pos,
-                "outlier_rate": metrics.outlier_rate(n_pos, n),
-                "cached": pm.from_cache,
-            }
-        )
-        for method in methods:
-            for seed in cfg.seeds:
-                r = _safe_run(method, pm.pts_a, pm.pts_b, pm.size_a, size_b, cfg, seed)
-                m = metrics.run_metrics(r.F, pm.pts_a, pm.pts_b, positive, cfg.threshold)
-                rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
-                rec["seed"] = seed
-                rec.update(asdict(m))
-                rec.update(
-                    has_model=r.F is not None,
-                    hypotheses=r.hypotheses,
-                    stage1_hypotheses=r.stage1_hypotheses,
-                    stage2_hypotheses=r.stage2_hypotheses,
-                    ms=r.ms,
-                    own_inliers=r.own_inliers,
-                    status=r.status,
-                    fallback=r.fallback,
-                    line_inliers=len(r.line_inliers) if method.separable else None,
-                )
-                res.runs.append(rec)
-                if method.separable and r.line_pair is not None and len(r.line_inliers):
-                    res.line_inliers.append((method.name, len(r.line_inliers)))
-                    if method.name == line_method:
-                        _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair)
-                if pair.scene not in res.examples and seed == cfg.seeds[0]:
-                    if method.name == (line_method or methods[0].name):
-                        res.examples[pair.scene] = Example(
-                            pair, pm.pts_a, pm.pts_b, positive, method.name, r
-                        )
-                if progress:
-                    progress(1, pair.pair_id)
+    try:
+        for pair in pairs:
+            _evaluate_pair(res, pair, methods, cache, progress)
+    except KeyboardInterrupt:
+        # keep whole pairs only: drop the runs of the pair that was interrupted
+        res.interrupted = True
+        complete = len(methods) * len(cfg.seeds)
+        if res.pairs and sum(r["pair"] == res.pairs[-1]["pair"] for r in res.runs) < complete:
+            last = res.pairs.pop()["pair"]
+            res.runs = [r for r in res.runs if r["pair"] != last]
+            res.examples = {k: v for k, v in res.examples.items() if v.pair.pair_id != last}
     return res
 
 

@@ -20,9 +20,10 @@ from typing import Any
 import cv2
 import numpy as np
 
+from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import normalize_fundamental, symmetric_epipolar_distance
 from sepfm_ros.geometry.estimate import Estimate
-from sepfm_ros.geometry.fundamental_problem import Correspondences, FundamentalProblem
+from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
 from sepfm_ros.geometry.line_pairs import (
     LineSearchOptions,
@@ -57,7 +58,7 @@ _DEFAULTS: dict[str, Any] = {
     "line_threshold": 0.5,  # T1: H_e inlier threshold, working px
     "min_line_inliers": 4,
     "triple": "raw",  # "raw" sample points or "synthesized" from the refined H_e
-    "plane_ratio": 0.9,  # inlier share on one homography flagged as a dominant plane
+    "plane_ratio": 0.95,  # inlier share on one homography flagged as a dominant plane
 }
 
 
@@ -113,16 +114,41 @@ def _degeneracy(p1: np.ndarray, p2: np.ndarray, threshold: float) -> str | None:
 
 
 def _dominant_plane(p1: np.ndarray, p2: np.ndarray, threshold: float, ratio: float) -> str | None:
-    """Flag F whose inliers are mostly explained by one homography (F is then unreliable)."""
+    """Flag an F whose inliers are (nearly) all explained by one homography.
+
+    With too few inliers off the plane, the epipolar geometry is not determined by the data
+    (a planar scene has a 3-parameter family of F), so F is reported as unreliable.
+
+    Args:
+        p1, p2: (K, 2) the inliers of F. ratio: share of inliers on the homography (within
+            2 x threshold px of transfer error) from which F is flagged; at least 10 inliers
+            must lie off the plane for F to pass.
+    """
     if len(p1) < 8:
         return None
-    H, mask = cv2.findHomography(p1, p2, cv2.RANSAC, 2.0 * threshold, maxIters=200, confidence=0.99)
-    if H is None or mask is None:
+    tol = 2.0 * threshold
+    H, _ = cv2.findHomography(p1, p2, 0)  # least squares: a cheap first look
+    if H is not None and _on_homography(H, p1, p2, tol).mean() < 0.5:
+        return None  # far from planar: skip the robust fit
+    H, _ = cv2.findHomography(p1, p2, cv2.RANSAC, tol, maxIters=200, confidence=0.99)
+    if H is None:
         return None
-    share = float(mask.ravel().astype(bool).mean())
-    if share >= ratio:
-        return f"degenerate: dominant plane ({100 * share:.0f}% of inliers fit one homography)"
+    on = _on_homography(H, p1, p2, tol)
+    off = int(np.count_nonzero(~on))
+    if on.mean() >= ratio or off < 10:
+        return (
+            f"degenerate: dominant plane ({100 * on.mean():.0f}% of inliers fit one "
+            f"homography, {off} off it)"
+        )
     return None
+
+
+def _on_homography(H: np.ndarray, p1: np.ndarray, p2: np.ndarray, tol: float) -> np.ndarray:
+    """(K,) bool: transfer error ||H p1 - p2|| below ``tol`` px."""
+    q = np.c_[p1, np.ones(len(p1))] @ H.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.linalg.norm(q[:, :2] / q[:, 2:] - p2, axis=1)
+    return np.nan_to_num(err, nan=np.inf) < tol
 
 
 def _triples(fit: LineHomographyFit, p1: np.ndarray, p2: np.ndarray, kind: str):
@@ -278,7 +304,7 @@ def estimate_fundamental(
         est.status = "no model: every sample was degenerate"
         est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
         return est
-    F, refits = _final_model(F, p1, p2, threshold, bool(opt["refine"]))
+    F, refits = _final_model(F, data, threshold, bool(opt["refine"]))
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
@@ -298,15 +324,15 @@ def estimate_fundamental(
 
 
 def _final_model(
-    F: np.ndarray, p1: np.ndarray, p2: np.ndarray, threshold: float, refine: bool
+    F: np.ndarray, data: Correspondences, threshold: float, refine: bool
 ) -> tuple[np.ndarray, int]:
     """Refit on all inliers (normalised eight-point), optionally Sampson-refined, rank 2.
 
     Returns (F, number of refitted models scored). A refit replaces F only if it lowers the
     MSAC cost at ``threshold`` (see :func:`iterative_refit`).
     """
-    fitted = iterative_refit(F, p1, p2, threshold, irls_iterations=5 if refine else 0)
-    candidates = [F, *fitted]
-    d = symmetric_epipolar_distance(np.stack(candidates), p1, p2)
+    fitted = iterative_refit(F, data, threshold, irls_iterations=5 if refine else 0)
+    candidates = np.stack([F, *fitted])
+    d = symmetric_epipolar_distance(candidates, data.pts1, data.pts2)
     cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
     return normalize_fundamental(candidates[int(np.argmin(cost))]), len(fitted)

@@ -7,44 +7,18 @@ solves, scores and refines through this one class, so their comparison is fair.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
+from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     apply_transform,
     denormalize,
-    normalization_transform,
     symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers import eight_point, seven_point
 
 SCORINGS = ("msac", "lmeds")
-
-
-@dataclass
-class Correspondences:
-    """Matches in pixels and in Hartley-normalised coordinates (computed once per estimate).
-
-    pts1, pts2: (N, 2) pixels. x1, x2: (N, 2) normalised. T1, T2: (3, 3) normalisations.
-    """
-
-    pts1: np.ndarray
-    pts2: np.ndarray
-    x1: np.ndarray
-    x2: np.ndarray
-    T1: np.ndarray
-    T2: np.ndarray
-
-    @classmethod
-    def from_pixels(cls, pts1: np.ndarray, pts2: np.ndarray) -> Correspondences:
-        T1 = normalization_transform(pts1)
-        T2 = normalization_transform(pts2)
-        return cls(pts1, pts2, apply_transform(T1, pts1), apply_transform(T2, pts2), T1, T2)
-
-    def __len__(self) -> int:
-        return int(self.pts1.shape[0])
 
 
 def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
@@ -125,7 +99,5 @@ class FundamentalProblem:
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
-        fitted = iterative_refit(
-            model, self.data.pts1, self.data.pts2, self.threshold, irls_iterations=2
-        )
+        fitted = iterative_refit(model, self.data, self.threshold, irls_iterations=2)
         return np.stack(fitted) if fitted else np.zeros((0, 3, 3))

@@ -132,6 +132,8 @@ def run_ransac(
     race: RaceOptions | None = None,
     batch: int = 64,
     initial: tuple[Any, float, int] | None = None,
+    extra_lo_ratio: float = 0.6,
+    max_extra_lo: int = 10,
 ) -> RansacResult:
     """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
 
@@ -178,7 +180,8 @@ def run_ransac(
 
     join()
     best_model, best_cost, best_count, leader = None, np.inf, -1, -1
-    best_raw_cost = np.inf
+    best_raw_cost, best_raw_count = np.inf, 0
+    extra_lo = 0
     hypotheses = 0
 
     def local_optimization(a: int, model: Any) -> None:
@@ -239,7 +242,10 @@ def run_ransac(
             # minimal samples are badly conditioned (fixed line points), as their raw support
             # then stays below a refined wrong-basin model's.
             if cost[i] < best_raw_cost:
-                best_raw_cost = float(cost[i])
+                best_raw_cost, best_raw_count = float(cost[i]), int(count[i])
+                local_optimization(a, models[i])
+            elif extra_lo < max_extra_lo and count[i] >= extra_lo_ratio * best_raw_count:
+                extra_lo += 1
                 local_optimization(a, models[i])
         # adaptive stopping on the leading arm
         if leader >= 0:

@@ -81,11 +81,13 @@ def replay_through_node(
     log_path: Path | None = None,
     startup_timeout_s: float = 60.0,
     drain_timeout_s: float = 10.0,
+    reliable_inputs: bool = True,
 ) -> LiveRun:
     """Replay ``bag`` into a fresh ``sepfm`` node subprocess and record its outputs to ``out``.
 
     ``params`` are extra node parameters (``name:=value``); mode and transport follow the bag.
-    The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too.
+    The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too. With
+    ``reliable_inputs`` the node's input subscriptions are made reliable (QoS override).
     """
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
@@ -102,6 +104,11 @@ def replay_through_node(
         spec = detect_inputs(reader)
         expected = expected_pairs(reader, spec, parse_params(params))
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
+    if reliable_inputs:
+        # Large images (KITTI: 470 kB) sent best effort over loopback UDP lose fragments; the
+        # node's QoS overrides make its input subscriptions reliable, as a bag player's are.
+        for topic in spec.topics:
+            cmd += ["-p", f"qos_overrides.{topic}.subscription.reliability:=reliable"]
     for p in params:
         cmd += ["-p", p]
     log = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
@@ -136,6 +143,7 @@ def replay_through_node(
                 raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
             time.sleep(0.05)
         replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
+        time.sleep(0.5)  # let the node's side of discovery settle too
         published = replayer.run(progress=progress)
         info_topic = output_topics()["estimate_info"]
         last, last_count = time.monotonic(), -1

@@ -19,6 +19,9 @@ from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers import eight_point, seven_point
 
 SCORINGS = ("msac", "lmeds")
+#: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the
+#: Sampson refinement is left to the final model).
+LO_FACTORS = (3.0, 2.0, 1.0)
 
 
 def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
@@ -99,5 +102,7 @@ class FundamentalProblem:
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
-        fitted = iterative_refit(model, self.data, self.threshold, irls_iterations=2)
+        fitted = iterative_refit(
+            model, self.data, self.threshold, factors=LO_FACTORS, irls_iterations=0
+        )
         return np.stack(fitted) if fitted else np.zeros((0, 3, 3))

@@ -14,6 +14,7 @@ from sensor_msgs.msg import CompressedImage, Image
 from sepfm_ros.ros.image_conversion import (
     SUPPORTED_ENCODINGS,
     ImageDecodeError,
+    check_compressed,
     image_to_array,
     image_to_numpy,
     message_to_numpy,
@@ -139,7 +140,25 @@ def test_every_supported_encoding_is_covered_here():
     covered = {"bgr8", "8UC3", "rgb8", "bgra8", "8UC4", "rgba8", "mono8", "8UC1", "mono16", "16UC1"}
     covered |= {f"bayer_{p}8" for p in ("rggb", "bggr", "gbrg", "grbg")}
     covered |= {"yuv422", "uyvy", "yuv422_yuy2", "yuyv"}
+    covered |= {"32FC1", "64FC1"}
     assert covered == set(SUPPORTED_ENCODINGS)
+
+
+@pytest.mark.parametrize("encoding", ["32FC1", "64FC1"])
+def test_float_images_stretch_finite_range_and_zero_non_finite(encoding):
+    dtype = np.float32 if encoding == "32FC1" else np.float64
+    values = (np.arange(H * W).reshape(H, W) * 0.5 - 3.0).astype(dtype)
+    values[0, 0], values[1, 1], values[2, 2] = np.nan, np.inf, -np.inf
+    msg = make_msg(as_rows(values), encoding, pad=2)
+    mono = image_to_numpy(msg, "mono8")
+    assert mono.dtype == np.uint8 and mono.shape == (H, W)
+    assert mono[0, 0] == mono[1, 1] == mono[2, 2] == 0
+    assert mono[-1, -1] == 255 and mono[0, 1] == 0  # finite min -> 0, max -> 255
+    assert mono[3, 5] > mono[3, 4]  # order kept
+    nan = np.full((H, W), np.nan, dtype)
+    with pytest.raises(ImageDecodeError) as err:
+        image_to_numpy(make_msg(as_rows(nan), encoding))
+    assert err.value.kind == "non_finite"
 
 
 @pytest.mark.parametrize(
@@ -152,6 +171,8 @@ def test_every_supported_encoding_is_covered_here():
         ({"step": W * 3 - 1}, "bad_step"),
         ({"data": bytes(W * 3 * H - 1)}, "short_data"),
         ({"data": b""}, "short_data"),
+        ({"data": bytes(W * 3 * H + 1)}, "long_data"),
+        ({"height": 10**6, "width": 10**6, "step": 3 * 10**6}, "short_data"),
     ],
 )
 def test_malformed_images_raise_a_clear_error(change, kind):
@@ -186,13 +207,30 @@ def test_compressed_png_16bit_is_stretched():
     assert mono.dtype == np.uint8 and mono.min() == 0 and mono.max() == 255
 
 
+def _encoded(ext: str) -> bytes:
+    return cv2.imencode(ext, cv2.resize(BGR, (64, 48)))[1].tobytes()
+
+
 @pytest.mark.parametrize(
-    ("data", "kind"), [(b"", "zero_size"), (b"not an image", "bad_compressed")]
+    ("data", "kind"),
+    [
+        (b"", "zero_size"),
+        (b"not an image", "bad_compressed"),
+        (b"\xff\xd8 not really", "bad_compressed"),
+        (_encoded(".jpg")[:-200], "truncated_compressed"),
+        (_encoded(".png")[:-30], "truncated_compressed"),
+        (_encoded(".png")[:40] + bytes(64) + _encoded(".png")[-12:], "bad_compressed"),
+    ],
+    ids=["empty", "text", "jpeg-soi-only", "jpeg-truncated", "png-truncated", "png-corrupt"],
 )
 def test_bad_compressed_raise_a_clear_error(data, kind):
+    msg = CompressedImage(format="jpeg", data=data)
     with pytest.raises(ImageDecodeError) as err:
-        message_to_numpy(CompressedImage(format="jpeg", data=data))
+        message_to_numpy(msg)
     assert err.value.kind == kind
+    if kind != "bad_compressed" or not data.startswith(b"\x89PNG"):
+        with pytest.raises(ImageDecodeError):  # caught without decoding
+            check_compressed(msg)
 
 
 @pytest.mark.parametrize("encoding", ["mono8", "bgr8", "mono16", "rgba8"])

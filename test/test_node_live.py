@@ -8,13 +8,8 @@ shared by the checks; shutdown gets nodes of its own. A unique ROS_DOMAIN_ID per
 
 from __future__ import annotations
 
-import os
 import signal
-import subprocess
-import sys
-import threading
 import time
-from pathlib import Path
 
 import cv2
 import numpy as np
@@ -23,28 +18,19 @@ from ground_truth import gt_fundamental, median_gt_inlier_error
 
 rclpy = pytest.importorskip("rclpy")
 
-from builtin_interfaces.msg import Time  # noqa: E402
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
-from rcl_interfaces.msg import Parameter as ParameterMsg  # noqa: E402
-from rcl_interfaces.msg import ParameterType, ParameterValue  # noqa: E402
-from rcl_interfaces.srv import GetParameters, SetParameters  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
-from sensor_msgs.msg import CompressedImage, Image, PointCloud2  # noqa: E402
-from std_msgs.msg import Header  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from ros_helpers import (  # noqa: E402
+    REPO,
+    Ros,
+    header,
+    image_msg,
+    next_stamp,
+    send_pair,
+    start_node,
+)
+from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
 from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
-from sepfm_ros.ros.messages import (  # noqa: E402
-    ESTIMATE_STATUS_NAME,
-    fundamental_from_image,
-    matches_from_pointcloud2,
-    stamp_ns,
-    status_values,
-)
-
-REPO = Path(__file__).resolve().parent.parent
-RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
-ANSWER_TIMEOUT = 30.0  # s; generous: the machine is shared and 2-core
 
 KITTI_STEREO = [
     ("kitti_seq2/left/000000.png", "kitti_seq2/right/000000.png"),
@@ -52,259 +38,6 @@ KITTI_STEREO = [
 ]
 TEMPLE_FRAMES = [f"templeRing/templeR{k:04d}.png" for k in (1, 2, 3, 4)]
 KITTI_FRAMES = [f"kitti_seq2/left/{k:06d}.png" for k in (10, 11, 12)]
-
-
-# --------------------------------------------------------------------------- node subprocess
-class NodeProcess:
-    """``python -m sepfm_ros node --ros-args ...`` as a subprocess with its output in a file."""
-
-    def __init__(self, name: str, tmp: Path, *ros_args: str) -> None:
-        self.name = name
-        self.log_path = tmp / f"{name}.log"
-        self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
-        cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={name}"]
-        cmd += list(ros_args)
-        env = dict(os.environ, PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
-        self.proc = subprocess.Popen(
-            cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT
-        )
-
-    def output(self) -> str:
-        if not self._log.closed:
-            self._log.flush()
-        return self.log_path.read_text()
-
-    def stop(self, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
-        if self.proc.poll() is None:
-            self.proc.send_signal(sig)
-            try:
-                self.proc.wait(timeout)
-            except subprocess.TimeoutExpired:
-                self.proc.kill()
-                self.proc.wait()
-                self._log.close()
-                raise AssertionError(f"{self.name} did not stop within {timeout} s") from None
-        self._log.close()
-        return self.proc.returncode
-
-
-# --------------------------------------------------------------------------- test-side client
-class Client:
-    """Publishes inputs to one node and collects its outputs, keyed by output stamp (ns)."""
-
-    def __init__(self, ros, node_name: str, inputs: dict[str, tuple[str, type]]) -> None:
-        self.ros = ros
-        self.node_name = node_name
-        self.lock = threading.Lock()
-        self.fundamental: dict[int, Image] = {}
-        self.matches: dict[int, PointCloud2] = {}
-        self.info: dict[int, DiagnosticStatus] = {}
-        self.debug: dict[int, Image] = {}
-        self.health: list[dict[str, str]] = []
-        self.pubs = {
-            key: ros.node.create_publisher(msg_type, topic, RELIABLE)
-            for key, (topic, msg_type) in inputs.items()
-        }
-        prefix = f"/{node_name}"
-        self.subs = [
-            ros.node.create_subscription(
-                Image, f"{prefix}/fundamental", self._keep(self.fundamental), RELIABLE
-            ),
-            ros.node.create_subscription(
-                PointCloud2, f"{prefix}/matches", self._keep(self.matches), RELIABLE
-            ),
-            ros.node.create_subscription(
-                DiagnosticArray, f"{prefix}/estimate_info", self._on_info, RELIABLE
-            ),
-            ros.node.create_subscription(
-                DiagnosticArray, "/diagnostics", self._on_diagnostics, RELIABLE
-            ),
-        ]
-        self._set = ros.node.create_client(SetParameters, f"{prefix}/set_parameters")
-        self._get = ros.node.create_client(GetParameters, f"{prefix}/get_parameters")
-
-    def _keep(self, store):
-        def callback(msg):
-            with self.lock:
-                store[stamp_ns(msg.header.stamp)] = msg
-
-        return callback
-
-    def _on_info(self, msg):
-        with self.lock:
-            for status in msg.status:
-                if status.name == ESTIMATE_STATUS_NAME:
-                    self.info[stamp_ns(msg.header.stamp)] = status
-
-    def _on_diagnostics(self, msg):
-        with self.lock:
-            for status in msg.status:
-                if status.name == f"{self.node_name}: node":
-                    self.health.append(status_values(status))
-
-    def subscribe_debug(self):
-        self.subs.append(
-            self.ros.node.create_subscription(
-                Image, f"/{self.node_name}/debug_image", self._keep(self.debug), RELIABLE
-            )
-        )
-
-    def wait_connected(self, timeout: float = 30.0) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            inputs = all(p.get_subscription_count() > 0 for p in self.pubs.values())
-            outputs = self.ros.node.count_publishers(f"/{self.node_name}/estimate_info") > 0
-            if inputs and outputs and self._set.service_is_ready():
-                time.sleep(0.3)  # let the node's side of discovery settle too
-                return
-            time.sleep(0.05)
-        raise AssertionError(f"node {self.node_name} not connected within {timeout} s")
-
-    def publish(self, key: str, msg) -> None:
-        self.pubs[key].publish(msg)
-
-    def wait_info(self, stamp: int, timeout: float = ANSWER_TIMEOUT) -> DiagnosticStatus:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with self.lock:
-                if stamp in self.info:
-                    return self.info[stamp]
-            time.sleep(0.01)
-        raise AssertionError(f"no ~/estimate_info for stamp {stamp} within {timeout} s")
-
-    def wait_outputs(self, stamp: int, need_f: bool = True, timeout: float = ANSWER_TIMEOUT):
-        """(info values, F or None, matches array) for the output stamp."""
-        status = self.wait_info(stamp, timeout)
-        deadline = time.monotonic() + 5.0
-        while time.monotonic() < deadline:
-            with self.lock:
-                have_f = stamp in self.fundamental
-                if stamp in self.matches and (have_f or not need_f):
-                    f_msg = self.fundamental.get(stamp)
-                    return (
-                        status_values(status) | {"_level": status.level, "_msg": status.message},
-                        None if f_msg is None else fundamental_from_image(f_msg),
-                        matches_from_pointcloud2(self.matches[stamp]),
-                    )
-            time.sleep(0.01)
-        raise AssertionError(f"F/matches for stamp {stamp} missing (info: {status_values(status)})")
-
-    def latest_health(self, after: float, timeout: float = 10.0) -> dict[str, str]:
-        """A /diagnostics report of this node received at least ``after`` s from now."""
-        with self.lock:
-            start = len(self.health)
-        time.sleep(after)
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            with self.lock:
-                if len(self.health) > start:
-                    return self.health[-1]
-            time.sleep(0.05)
-        raise AssertionError(f"no /diagnostics report from {self.node_name}")
-
-    def call(self, client, request, timeout: float = 10.0):
-        future = client.call_async(request)
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert future.done(), "parameter service did not answer"
-        return future.result()
-
-    def set_parameter(self, name: str, value) -> tuple[bool, str]:
-        if isinstance(value, bool):
-            pv = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
-        elif isinstance(value, int):
-            pv = ParameterValue(type=ParameterType.PARAMETER_INTEGER, integer_value=value)
-        elif isinstance(value, float):
-            pv = ParameterValue(type=ParameterType.PARAMETER_DOUBLE, double_value=value)
-        else:
-            pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
-        request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=pv)])
-        result = self.call(self._set, request).results[0]
-        return result.successful, result.reason
-
-    def get_parameter(self, name: str):
-        value = self.call(self._get, GetParameters.Request(names=[name])).values[0]
-        return {
-            ParameterType.PARAMETER_INTEGER: value.integer_value,
-            ParameterType.PARAMETER_DOUBLE: value.double_value,
-            ParameterType.PARAMETER_STRING: value.string_value,
-        }[value.type]
-
-
-class Ros:
-    """The test process's rclpy context, node and background executor."""
-
-    def __init__(self) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("sepfm_live_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - context shut down at teardown
-            pass
-
-    def close(self) -> None:
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(5.0)
-
-
-# --------------------------------------------------------------------------- messages
-_clock = [int(time.time()) * 1_000_000_000]
-
-
-def next_stamp(step_ms: int = 100) -> int:
-    _clock[0] += step_ms * 1_000_000
-    return _clock[0]
-
-
-def header(stamp: int, frame_id: str = "cam") -> Header:
-    return Header(
-        stamp=Time(sec=stamp // 1_000_000_000, nanosec=stamp % 1_000_000_000), frame_id=frame_id
-    )
-
-
-def gray_to_bytes(gray: np.ndarray, encoding: str) -> tuple[np.ndarray, bool]:
-    """(H, row_bytes) uint8 rows of ``gray`` in ``encoding``, and whether they are big-endian."""
-    h, w = gray.shape
-    if encoding in ("mono8", "8UC1"):
-        return gray, False
-    if encoding in ("mono16", "16UC1"):
-        return (gray.astype(">u2") << 4).view(np.uint8).reshape(h, 2 * w), True
-    if encoding in ("bgr8", "rgb8", "8UC3"):
-        return np.repeat(gray, 3, axis=1), False
-    if encoding in ("bgra8", "rgba8", "8UC4"):
-        rgba = np.dstack([gray, gray, gray, np.full_like(gray, 255)])
-        return rgba.reshape(h, 4 * w), False
-    if encoding.startswith("bayer_"):
-        return gray, False  # a grey scene looks the same through every colour filter
-    if encoding in ("yuv422", "uyvy", "yuv422_yuy2", "yuyv"):
-        out = np.full((h, w, 2), 128, np.uint8)
-        out[..., 1 if encoding in ("yuv422", "uyvy") else 0] = gray
-        return out.reshape(h, 2 * w), False
-    raise ValueError(encoding)
-
-
-def image_msg(gray: np.ndarray, stamp: int, encoding: str = "mono8", pad: int = 0) -> Image:
-    rows, big = gray_to_bytes(gray, encoding)
-    padded = np.concatenate([rows, np.zeros((rows.shape[0], pad), np.uint8)], axis=1)
-    return Image(
-        header=header(stamp),
-        height=gray.shape[0],
-        width=gray.shape[1],
-        encoding=encoding,
-        is_bigendian=int(big),
-        step=padded.shape[1],
-        data=padded.tobytes(),
-    )
 
 
 # --------------------------------------------------------------------------- fixtures
@@ -328,21 +61,10 @@ def ros(ros_domain_id):
     r.close()
 
 
-def _start(name, tmp, ros, inputs, *args):
-    proc = NodeProcess(name, tmp, *args)
-    client = Client(ros, name, inputs)
-    try:
-        client.wait_connected()
-    except AssertionError:
-        proc.stop()
-        raise AssertionError(f"{name} did not come up:\n{proc.output()}") from None
-    return proc, client
-
-
 @pytest.fixture(scope="module")
 def stereo(ros, tmp_path_factory):
     ns = "/t_stereo"
-    proc, client = _start(
+    proc, client = start_node(
         "sepfm_stereo",
         tmp_path_factory.mktemp("stereo"),
         ros,
@@ -366,7 +88,7 @@ def stereo(ros, tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def motion(ros, tmp_path_factory):
-    proc, client = _start(
+    proc, client = start_node(
         "sepfm_motion",
         tmp_path_factory.mktemp("motion"),
         ros,
@@ -385,7 +107,7 @@ def motion(ros, tmp_path_factory):
 @pytest.fixture(scope="module")
 def compressed(ros, tmp_path_factory):
     ns = "/t_comp"
-    proc, client = _start(
+    proc, client = start_node(
         "sepfm_comp",
         tmp_path_factory.mktemp("compressed"),
         ros,
@@ -402,14 +124,6 @@ def compressed(ros, tmp_path_factory):
     )
     yield proc, client
     proc.stop()
-
-
-def send_pair(client, left: Image, right: Image, right_first: bool = False) -> None:
-    order = (
-        [("right", right), ("left", left)] if right_first else [("left", left), ("right", right)]
-    )
-    for key, msg in order:
-        client.publish(key, msg)
 
 
 def assert_accurate(shared_data, values, F, cloud, img_a, img_b):
@@ -668,7 +382,7 @@ def test_compressed_transport_jpeg_and_png(compressed, images, shared_data):
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 def test_clean_shutdown(ros, tmp_path, sig):
     name = f"sepfm_shutdown_{sig.name.lower()}"
-    proc, _ = _start(
+    proc, _ = start_node(
         name, tmp_path, ros, {"image": (f"/{name}/in", Image)}, "-r", f"image_raw:=/{name}/in",
         "-p", "mode:=motion",
     )  # fmt: skip

@@ -8,8 +8,14 @@ normalisation of 16-bit images. Messages are read by field access only (``height
 rclpy messages and rosbags messages both work.
 
 Supported raw encodings (``SUPPORTED_ENCODINGS``): mono8, mono16, 8UC1, 8UC3, 8UC4, 16UC1, bgr8,
-rgb8, bgra8, rgba8, bayer_rggb8/bggr8/gbrg8/grbg8, yuv422 (= uyvy) and yuv422_yuy2 (= yuyv).
-Compressed: whatever OpenCV's ``imdecode`` reads (jpeg, png, ...).
+rgb8, bgra8, rgba8, bayer_rggb8/bggr8/gbrg8/grbg8, yuv422 (= uyvy), yuv422_yuy2 (= yuyv), and
+32FC1/64FC1 (float images: the finite pixels' range is stretched to 8 bits, NaN/inf become 0).
+Compressed: jpeg and png (what image_transport's compressed plugin sends), decoded by OpenCV.
+
+Validation is split so a node can reject most bad messages cheaply on arrival:
+:func:`check_image` / :func:`check_compressed` look at fields and a few bytes only; what needs
+the pixels (undecodable compressed data, float images without one finite pixel) is found when
+decoding.
 """
 
 from __future__ import annotations
@@ -44,6 +50,8 @@ SUPPORTED_ENCODINGS: tuple[str, ...] = (
     "uyvy",
     "yuv422_yuy2",
     "yuyv",
+    "32FC1",
+    "64FC1",
 )
 
 COLOR_SPACES = ("mono8", "bgr8")
@@ -53,9 +61,19 @@ ERROR_KINDS = (
     "zero_size",
     "bad_step",
     "short_data",
+    "long_data",
     "unknown_encoding",
+    "non_finite",
     "bad_compressed",
+    "truncated_compressed",
 )
+
+_JPEG_SOI = b"\xff\xd8\xff"
+_JPEG_EOI = b"\xff\xd9"
+_PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+_PNG_IEND = b"IEND"
+# End markers must lie within this many bytes of the end (encoders may pad a little).
+_END_MARKER_WINDOW = 64
 
 
 class ImageDecodeError(ValueError):
@@ -86,8 +104,9 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
 
     Raises:
         ImageDecodeError: zero width/height (``zero_size``), step smaller than a row
-            (``bad_step``), data shorter than step x height (``short_data``), or an unsupported
-            encoding (``unknown_encoding``).
+            (``bad_step``), data shorter than step x height (``short_data``), data longer than
+            step x height (``long_data``: the size claim and the data disagree), or an
+            unsupported encoding (``unknown_encoding``).
     """
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     dtype, nchan = pixel_layout(msg.encoding)
@@ -106,7 +125,44 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
             "short_data",
             f"data has {size} B, expected step x height = {step} x {height} = {step * height} B",
         )
+    if size > step * height:
+        raise ImageDecodeError(
+            "long_data",
+            f"data has {size} B, more than step x height = {step} x {height} = {step * height} B",
+        )
     return dtype, nchan
+
+
+def check_compressed(msg: Any) -> None:
+    """Validate a sensor_msgs/CompressedImage from its first and last bytes (no decoding).
+
+    Raises:
+        ImageDecodeError: no data (``zero_size``), data that is neither jpeg nor png
+            (``bad_compressed``), or jpeg/png data without its end marker
+            (``truncated_compressed``).
+    """
+    data = memoryview(msg.data).cast("B")
+    n = data.nbytes
+    if n == 0:
+        raise ImageDecodeError("zero_size", f"compressed image ({msg.format!r}) has no data")
+    head = bytes(data[:8])
+    tail = bytes(data[max(0, n - _END_MARKER_WINDOW) :])
+    if head.startswith(_JPEG_SOI):
+        if _JPEG_EOI not in tail:
+            raise ImageDecodeError(
+                "truncated_compressed", f"jpeg data of {n} B has no end marker (truncated)"
+            )
+    elif head == _PNG_SIGNATURE:
+        if _PNG_IEND not in tail:
+            raise ImageDecodeError(
+                "truncated_compressed", f"png data of {n} B has no IEND chunk (truncated)"
+            )
+    else:
+        raise ImageDecodeError(
+            "bad_compressed",
+            f"{n} B of compressed image ({msg.format!r}) are neither jpeg nor png "
+            f"(first bytes {head[:4].hex()})",
+        )
 
 
 def image_to_array(msg: Any) -> np.ndarray:
@@ -136,6 +192,8 @@ def _to_mono8_or_bgr8(img: np.ndarray, encoding: str, color_space: str) -> np.nd
     if color_space not in COLOR_SPACES:
         raise ValueError(f"color_space must be one of {COLOR_SPACES}, got {color_space!r}")
     enc = _canonical(encoding)
+    if img.dtype.kind == "f":
+        img, enc = _float_to_mono8(img), "mono8"
     if img.dtype == np.uint16:
         # 16-bit cameras often use 10 or 12 bits: stretch the image's own range to 8 bits.
         gray16 = img if img.ndim == 2 else None
@@ -148,6 +206,22 @@ def _to_mono8_or_bgr8(img: np.ndarray, encoding: str, color_space: str) -> np.nd
         return np.asarray(convert_color(img, enc, color_space))
     except ImageError as err:  # pragma: no cover - every supported encoding converts
         raise ImageDecodeError("unknown_encoding", str(err)) from err
+
+
+def _float_to_mono8(img: np.ndarray) -> np.ndarray:
+    """(H, W) float image -> uint8: finite range stretched to 0..255, NaN/inf -> 0.
+
+    Raises ImageDecodeError("non_finite") when no pixel is finite.
+    """
+    finite = np.isfinite(img)
+    if not finite.any():
+        raise ImageDecodeError("non_finite", f"float image {img.shape[::-1]} has no finite pixel")
+    values = img[finite].astype(np.float64)
+    low, high = float(values.min()), float(values.max())
+    scale = 255.0 / (high - low) if high > low else 0.0
+    out = np.zeros(img.shape, np.uint8)
+    out[finite] = np.clip(np.rint((values - low) * scale), 0, 255).astype(np.uint8)
+    return out
 
 
 def image_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
@@ -163,12 +237,11 @@ def compressed_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
     """A sensor_msgs/CompressedImage (jpeg, png, ...) as mono8 (H, W) or bgr8 (H, W, 3) uint8.
 
     Raises:
-        ImageDecodeError: empty data (``zero_size``) or data OpenCV cannot decode
+        ImageDecodeError: see :func:`check_compressed`; data OpenCV cannot decode
             (``bad_compressed``).
     """
+    check_compressed(msg)
     data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
-    if data.size == 0:
-        raise ImageDecodeError("zero_size", f"compressed image ({msg.format!r}) has no data")
     flag = cv2.IMREAD_GRAYSCALE if color_space == "mono8" else cv2.IMREAD_COLOR
     if "16" in str(msg.format) or "png" in str(msg.format).lower():
         flag = cv2.IMREAD_UNCHANGED  # keep 16-bit png depth; normalised below

@@ -80,7 +80,7 @@ class RaceOptions:
             sample with probability ``1 - drop_alpha`` is dropped.
     """
 
-    add_after: tuple[int, ...] = (12,)
+    add_after: tuple[int, ...] = (40,)
     add_growth: float = 2.0
     drop_ratio: float = 0.8
     drop_alpha: float = 0.1

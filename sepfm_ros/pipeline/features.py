@@ -40,6 +40,10 @@ def make_detector(features: str = "orb", max_features: int = 1000) -> cv2.Featur
     if features == "sift":
         return cv2.SIFT_create(nfeatures=int(max_features) if max_features else 0)
     if features == "akaze":
+        if not hasattr(cv2, "AKAZE_create"):
+            raise ValueError(
+                f"features 'akaze' are not available in this OpenCV build ({cv2.__version__})"
+            )
         return cv2.AKAZE_create()
     raise ValueError(f"unknown features {features!r}; expected one of {FEATURES}")
 

@@ -100,7 +100,7 @@ def detector_available(features: str) -> bool:
     """True when this OpenCV build can create the ``features`` detector."""
     try:
         make_detector(features, 100)
-    except (AttributeError, cv2.error):
+    except (AttributeError, ValueError, cv2.error):
         return False
     return True
 

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from rosbags.interfaces import Connection, ConnectionExtRosbag2, Qos
-from rosbags.rosbag2 import Reader, ReaderError, StoragePlugin, Writer, WriterError
+from rosbags.rosbag2 import Reader, StoragePlugin, Writer, WriterError
 from rosbags.rosbag2.enums import CompressionFormat, CompressionMode
 from rosbags.typesys import Stores, get_typestore
 from ruamel.yaml import YAML
@@ -137,7 +137,7 @@ class BagReader:
         try:
             self._reader = Reader(self.path)
             self._reader.open()
-        except (ReaderError, FileNotFoundError, OSError, KeyError, ValueError) as err:
+        except Exception as err:  # noqa: BLE001 - rosbags raises many kinds on bad storage
             raise BagCorruptError(f"cannot read bag {self.path}: {err}") from None
         self.topics: dict[str, TopicInfo] = {}
         for conn in self._reader.connections:
@@ -212,8 +212,10 @@ class BagReader:
         try:
             for conn, log_time, data in self._reader.messages(conns, start=start_ns):
                 yield RawMessage(conn.topic, conn.msgtype, int(log_time), bytes(data))
-        except (ReaderError, OSError, struct.error, ValueError, KeyError, EOFError) as err:
-            raise BagCorruptError(f"bag {self.path} is corrupt: {err}") from None
+        except Exception as err:  # noqa: BLE001 - corrupt storage raises many kinds (zstd, lz4, ...)
+            raise BagCorruptError(
+                f"bag {self.path} is corrupt: {type(err).__name__}: {err}"
+            ) from None
 
     def deserialize(self, msg: RawMessage) -> Any:
         """A rosbags message object (field access like rclpy messages)."""

@@ -329,3 +329,17 @@ def test_ctrl_c_keeps_a_partial_report_of_whole_pairs(tmp_path):
         per_pair[r["pair"]] = per_pair.get(r["pair"], 0) + 1
     assert 0 < len(per_pair) < 40
     assert set(per_pair.values()) == {len(available_methods()) * 3}  # whole pairs only
+
+
+def test_readme_without_markers_is_an_error_not_a_silent_skip(tmp_path, capsys):
+    manifest = tmp_path / "m.json"
+    manifest.write_text(json.dumps([synthetic_entry(2)]))
+    readme = tmp_path / "README.md"
+    readme.write_text("# no markers here\n")
+    argv = ["--manifest", str(manifest), "--out", str(tmp_path / "o"), "--cache", "none",
+            "--methods", "ransac8", "--seeds", "0", "--no-progress",
+            "--readme", str(readme)]  # fmt: skip
+    assert cli.main(argv) == 2
+    assert "eval-table" in capsys.readouterr().err
+    assert readme.read_text() == "# no markers here\n"
+    assert (tmp_path / "o" / "report.md").is_file()  # the report itself is not lost

@@ -472,6 +472,12 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
         "",
         "![line inliers](fig7_line_inliers.png) ![line homography](fig8_line_homography_cdf.png)",
         "",
+        "The line homography error is that of the H_e the estimated (solid) or GT (dashed) F "
+        "induces on the line pair, after projecting the matches onto the lines. It is large "
+        "where the line pair is close to an epipolar line (near-horizontal lines in rectified "
+        "stereo, lines towards the epipole under forward motion): there it measures how well "
+        "the line pair conditions H_e more than how good F is.",
+        "",
         "Symmetric epipolar error of the positives per method:",
         "",
         "![error cdf](error_cdf.png)",

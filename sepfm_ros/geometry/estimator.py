@@ -79,12 +79,13 @@ def _validate_points(pts1: Any, pts2: Any, min_points: int) -> tuple[np.ndarray,
             f"{int(np.flatnonzero(bad)[0])})"
         )
     rows = np.concatenate([p1, p2], axis=1)
-    _, first, counts = np.unique(rows, axis=0, return_index=True, return_counts=True)
-    if (counts > 1).any():
+    order = np.lexsort(rows.T[::-1])
+    same = np.all(rows[order[1:]] == rows[order[:-1]], axis=1)
+    if same.any():
+        i, j = sorted((int(order[np.argmax(same)]), int(order[np.argmax(same) + 1])))
         raise ValueError(
-            f"{int((counts - 1).sum())} duplicate correspondences (e.g. the match at index "
-            f"{int(first[np.argmax(counts > 1)])} appears {int(counts.max())} times); "
-            "remove duplicates first"
+            f"{int(same.sum())} duplicate correspondences (e.g. the matches at indices {i} and "
+            f"{j} are identical); remove duplicates first"
         )
     return p1, p2
 
@@ -331,7 +332,7 @@ def _final_model(
     Returns (F, number of refitted models scored). A refit replaces F only if it lowers the
     MSAC cost at ``threshold`` (see :func:`iterative_refit`).
     """
-    fitted = iterative_refit(F, data, threshold, irls_iterations=5 if refine else 0)
+    fitted = iterative_refit(F, data, threshold, irls_iterations=2 if refine else 0)
     candidates = np.stack([F, *fitted])
     d = symmetric_epipolar_distance(candidates, data.pts1, data.pts2)
     cost = np.minimum(d * d, threshold * threshold).sum(axis=1)

@@ -26,7 +26,7 @@ SHARED_BAGS = {  # name -> (sequence, first frame, frames)
     "kitti_motion": ("kitti_motion", 20, 11),
     "templeRing": ("templeRing", 5, 11),
 }
-BAG_RATE_HZ = 2.0  # KITTI pairs take 110-250 ms on the shared 2-core machines
+BAG_RATE_HZ = 1.0  # KITTI pairs take 110-250 ms (more under load) on shared 2-core machines
 
 
 @pytest.fixture(scope="module")

@@ -158,3 +158,18 @@ def test_degenerate_data_gives_status_not_exception(method):
     q = np.c_[p, np.ones(len(p))] @ H.T
     est = estimate_fundamental(p, q[:, :2] / q[:, 2:], (640, 480), method=method, seed=0)
     assert est.status.startswith("degenerate") and "plane" in est.status
+
+
+def test_estimate_exposes_H_e_consistent_with_line_inliers():
+    from sepfm_ros.geometry.line_pairs import line_parameter
+    from sepfm_ros.geometry.solvers.line_homography import transfer
+
+    sp = make_pair(n_inliers=100, n_outliers=0, n_lines=2, points_per_line=15, noise=0.0, seed=9)
+    est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep5", seed=0)
+    assert est.H_e is not None and est.control_points is not None
+    c1, c2 = est.control_points
+    t1 = line_parameter(sp.pts1[est.line_inliers], c1)
+    t2 = line_parameter(sp.pts2[est.line_inliers], c2)
+    # transfer error along line 2 in pixels
+    err = np.abs(transfer(est.H_e, t1) - t2) * np.linalg.norm(c2[1] - c2[0])
+    assert err.max() < 1e-6

@@ -22,6 +22,11 @@ class Estimate:
         line_pair: ((a1, b1, c1), (a2, b2, c2)) the image lines used (``a u + b v + c = 0`` in
             pixels of image 1 and image 2, ``a^2 + b^2 = 1``), or None.
         line_inliers: (M,) int indices of the matches on the line pair that agree with H_e.
+        H_e: (2, 2) the epipolar line homography of stage 1 (refined on the line inliers), or
+            None; it maps (alpha, beta) = (1 - t, t) of a point c1 + t (c2 - c1) on line 1 to
+            those of its correspondence on line 2, up to scale.
+        control_points: ((2, 2), (2, 2)) the control points c1, c2 of line 1 and of line 2 in
+            pixels (where the lines meet the image borders), or None.
         fallback: True when standard RANSAC ran because no usable line pair was found.
         status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
         method: the method name that produced this estimate.
@@ -35,6 +40,8 @@ class Estimate:
     stage2_hypotheses: int = 0
     line_pair: tuple[tuple[float, float, float], tuple[float, float, float]] | None = None
     line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    H_e: np.ndarray | None = None
+    control_points: tuple[np.ndarray, np.ndarray] | None = None
     fallback: bool = False
     status: str = "ok"
     method: str = ""

@@ -277,6 +277,8 @@ def estimate_fundamental(
             best = fits[result.leader]
             est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
             est.line_inliers = best.inliers
+            est.H_e = best.H
+            est.control_points = (best.ctrl1, best.ctrl2)
         est.timings_ms["stage1"] = 1e3 * stage1_s[0]
         est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t1 - stage1_s[0])
         if not fits:

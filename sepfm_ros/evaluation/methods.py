@@ -44,6 +44,8 @@ class MethodResult:
         line_pair: ((a, b, c), (a, b, c)) line pair used by the separable methods, else None.
         line_inliers: (M,) int indices of matches on the line pair agreeing with H_e.
         fallback: the separable method fell back to plain RANSAC.
+        H_e, control_points: the separable method's stage-1 line homography and the control
+            points of its line pair (None otherwise).
     """
 
     F: np.ndarray | None
@@ -56,6 +58,8 @@ class MethodResult:
     line_pair: tuple | None = None
     line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     fallback: bool = False
+    H_e: np.ndarray | None = None
+    control_points: tuple[np.ndarray, np.ndarray] | None = None
 
 
 #: run(pts_a (N,2), pts_b (N,2), size_a (w,h), size_b (w,h), threshold px, confidence, seed)
@@ -101,6 +105,8 @@ def _ours(name: str) -> Runner:
             line_pair=est.line_pair,
             line_inliers=np.asarray(est.line_inliers, dtype=np.int64),
             fallback=bool(est.fallback),
+            H_e=est.H_e,
+            control_points=est.control_points,
         )
 
     return run

@@ -8,7 +8,7 @@ Figures (matplotlib, Agg backend, no display needed):
   (median per outlier-rate bin), for the methods that expose a count.
 - ``fig7_line_inliers.png``: inliers per matched line pair (histogram, the paper's Fig. 7).
 - ``fig8_line_homography_cdf.png``: CDF per scene of the line homography error (Fig. 8) of the
-  line inliers, under the H_e that the estimated and the GT F induce on the line pair.
+  line inliers, under the estimator's stage-1 H_e (solid) and the H_e the GT F induces (dashed).
 - ``error_cdf.png``: CDF of the per-run mean symmetric epipolar error of the positives, per method.
 - ``example_<scene>.png``: one pair per scene with the line pair, inliers and epipolar lines.
 """
@@ -224,15 +224,15 @@ def _cdf(ax, values, label, **style):
 
 
 def fig8_line_homography_cdf(res: EvalResults, path: Path) -> None:
-    """CDF per scene of the line homography error of the line inliers, H_e induced by the
-    estimated F (solid) and by the GT F (dashed)."""
+    """CDF per scene of the line homography error of the line inliers under the estimator's
+    stage-1 H_e (solid) and the H_e induced by the GT F (dashed)."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     scenes = sorted(set(res.line_errors_est) | set(res.line_errors_gt))
     for k, scene in enumerate(scenes):
         color = f"C{k % 10}"
         for vals, style, what in (
-            (res.line_errors_est.get(scene, []), "-", "estimated F"),
+            (res.line_errors_est.get(scene, []), "-", "stage-1 H_e"),
             (res.line_errors_gt.get(scene, []), "--", "GT F"),
         ):
             if vals:

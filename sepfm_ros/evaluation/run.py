@@ -17,6 +17,7 @@ from sepfm_ros.evaluation import metrics
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec
 from sepfm_ros.evaluation.matches_cache import MatchesCache
 from sepfm_ros.evaluation.methods import Method, MethodResult
+from sepfm_ros.geometry.line_homography_fit import line_homography_error
 
 #: Fewer putative matches than this and no compared method can run (eight-point methods).
 MIN_MATCHES = 8
@@ -58,7 +59,7 @@ class EvalResults:
         errors: pairs that could not be evaluated, with the reason.
         line_inliers: (method, count) per separable run that found a line pair.
         line_errors_est / line_errors_gt: scene -> line homography errors (px) of the line
-            inliers under the estimated F and under the GT F, first separable method, all seeds.
+            inliers under the stage-1 H_e and under the GT F, first separable method, all seeds.
         examples: scene -> Example (first evaluated pair of the scene, first seed).
         interrupted: the run was stopped (Ctrl-C); only whole pairs are kept.
     """
@@ -197,8 +198,9 @@ def evaluate(
 def _collect_line_errors(res: EvalResults, r: MethodResult, pts_a, pts_b, pair: PairSpec) -> None:
     idx = r.line_inliers
     la, lb = (np.asarray(line, dtype=np.float64) for line in r.line_pair)
-    if r.F is not None:
-        e = metrics.line_homography_error(r.F, la, lb, pts_a[idx], pts_b[idx])
+    if r.H_e is not None and r.control_points is not None:
+        # the estimator's own stage-1 H_e, as in the paper's Fig. 8
+        e = line_homography_error(r.H_e, r.control_points, pts_a[idx], pts_b[idx])
         res.line_errors_est.setdefault(pair.scene, []).extend(float(x) for x in e)
     e = metrics.line_homography_error(pair.F_gt, la, lb, pts_a[idx], pts_b[idx])
     res.line_errors_gt.setdefault(pair.scene, []).extend(float(x) for x in e)

@@ -132,3 +132,31 @@ def fit_line_homography(
                 pair, res.model, ctrl1, ctrl2, support[inl], hyps, orientation
             ), hyps
     return None, hyps
+
+
+def line_homography_error(
+    H: np.ndarray,
+    control_points: tuple[np.ndarray, np.ndarray],
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+) -> np.ndarray:
+    """Symmetric transfer error of H_e along the line pair, in pixels of the images (Fig. 8).
+
+    The points are projected onto their lines (parameter t along the control points); the error
+    is the mean of |t2 - H_e(t1)| * |c2' - c1'| and |t1 - H_e^-1(t2)| * |c2 - c1|.
+
+    Args:
+        H: (2, 2) H_e. control_points: ((2, 2), (2, 2)) of line 1 and line 2, px.
+        pts1, pts2: (M, 2) matches on the line pair, px.
+    Returns:
+        (M,) errors in px (inf where a point maps to infinity).
+    """
+    c1, c2 = control_points
+    prob = LineHomographyProblem(
+        line_parameter(pts1, c1),
+        line_parameter(pts2, c2),
+        float(np.linalg.norm(c1[1] - c1[0])),
+        float(np.linalg.norm(c2[1] - c2[0])),
+        threshold=np.inf,
+    )
+    return prob.errors(np.asarray(H, dtype=np.float64)[None])[0]

@@ -4,7 +4,7 @@
     python scripts/make_bundled_bags.py [--force]
 
 Each bag is a synthetic "street" scene (textured planes with straight edges, known cameras, so the
-ground-truth F is exact) at 5 frames per second (a rate the node keeps up with on 2 cores while
+ground-truth F is exact) at 2 frames per second (a rate the node keeps up with on busy 2-core machines while
 the demo also records its debug image), zstd-compressed mcap chunks:
 
 - ``bags/synthetic_stereo``: 12 stereo frames, mono8, ``/left/image_raw`` + ``/right/image_raw``;
@@ -23,7 +23,7 @@ from pathlib import Path
 
 from sepfm_ros.ros.make_bag import make_bag, synthetic_frames
 
-RATE_HZ = 5.0
+RATE_HZ = 2.0
 BAGS = Path(__file__).resolve().parent.parent / "bags"
 
 # name -> (kind, frames, encoding)

@@ -143,7 +143,7 @@ def replay_through_node(
                 raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
             time.sleep(0.05)
         replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
-        time.sleep(0.5)  # let the node's side of discovery settle too
+        time.sleep(1.5)  # let the node's side of discovery settle too (matching is one-sided)
         published = replayer.run(progress=progress)
         info_topic = output_topics()["estimate_info"]
         last, last_count = time.monotonic(), -1

@@ -21,6 +21,7 @@ import cv2
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
+from sepfm_ros.geometry.degeneracy import plane_and_parallax
 from sepfm_ros.geometry.epipolar import normalize_fundamental, symmetric_epipolar_distance
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
@@ -59,6 +60,7 @@ _DEFAULTS: dict[str, Any] = {
     "min_line_inliers": 4,
     "triple": "raw",  # "raw" sample points or "synthesized" from the refined H_e
     "plane_ratio": 0.95,  # inlier share on one homography flagged as a dominant plane
+    "plane_check": True,  # DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py)
 }
 
 
@@ -191,7 +193,7 @@ def estimate_fundamental(
         seed: seed of the ``numpy.random.Generator`` behind every random choice.
         **options: see ``_DEFAULTS`` in this module (max_samples, refine, hough_width,
             hough_min_votes, line_distance, hough_points, max_line_pairs, line_threshold,
-            min_line_inliers, triple, plane_ratio).
+            min_line_inliers, triple, plane_ratio, plane_check).
     Raises:
         ValueError: unknown method or option, malformed points or sizes, too few points.
     """
@@ -309,6 +311,11 @@ def estimate_fundamental(
         return est
     F, refits = _final_model(F, data, threshold, bool(opt["refine"]))
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
+    plane = None
+    if opt["plane_check"]:
+        check = plane_and_parallax(F, p1, p2, threshold, rng)
+        F, plane = check.F, check.reason
+        est.stage2_hypotheses += check.candidates
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
     est.inliers = symmetric_epipolar_distance(F, p1, p2) < threshold
@@ -316,6 +323,8 @@ def estimate_fundamental(
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
+    elif plane is not None:
+        est.status = plane
     else:
         plane = _dominant_plane(
             p1[est.inliers], p2[est.inliers], threshold, float(opt["plane_ratio"])

@@ -1,0 +1,193 @@
+"""A DEGENSAC-style check of a final F against a dominant plane (plane-and-parallax).
+
+When most inliers of a scene lie on one plane, RANSAC often returns an F fitted to a sample that
+was (nearly) all on the plane: such an F explains the whole plane (a planar scene admits a
+3-parameter family of F) but not the off-plane points, and adaptive stopping ends the search
+before an all-inlier sample with enough off-plane points is drawn. DEGENSAC (Chum, Werner,
+Matas, CVPR 2005) repairs this by estimating the plane's homography H and then F = [e']_x H from
+H and just two off-plane correspondences (plane and parallax), which needs few samples.
+
+:func:`plane_and_parallax` does this after the estimator: if a homography explains at least
+``plane_share`` of F's inliers, F = [e']_x H is hypothesised from random pairs of matches off the
+plane, each candidate (and a least-squares refit of the best) is scored with the same truncated
+quadratic (MSAC) cost as the estimator, and the best of the original F and the candidates is
+returned. The original F is kept unless a candidate has a strictly lower cost.
+
+A lower cost is not always enough: with many outliers, an F fitted to the plane can collect more
+chance agreements from outliers than the true F gains from a few off-plane points, and then the
+wrong F is the better one by any inlier-counting cost. So the check also asks whether F's support
+*off the plane* is more than chance: the off-plane matches are re-paired at random (pts2
+shuffled) and counted against F the same way; the off-plane inliers must exceed that chance
+count by ``min_excess`` and by three standard deviations, otherwise F is flagged as determined by
+the plane alone (``reason``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+from sepfm_ros.geometry.correspondences import Correspondences
+from sepfm_ros.geometry.epipolar import homogeneous, normalize_fundamental
+from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
+from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
+
+
+@dataclass
+class PlaneCheck:
+    """Result of :func:`plane_and_parallax`.
+
+    Attributes:
+        F: (3, 3) the model to use (unit norm): the input F or a better one.
+        replaced: True when a plane-and-parallax model beat the input F.
+        planar: True when a homography explained at least ``plane_share`` of F's inliers.
+        plane_inliers: inliers of the returned F that lie on the homography.
+        off_plane_inliers: inliers of the returned F off the homography.
+        candidates: plane-and-parallax models scored.
+        off_plane_chance: off-plane inliers expected by chance (shuffled pairs), mean.
+        reason: why F is not supported off the plane ("degenerate: ..."), or None.
+    """
+
+    F: np.ndarray
+    replaced: bool = False
+    planar: bool = False
+    plane_inliers: int = 0
+    off_plane_inliers: int = 0
+    candidates: int = 0
+    off_plane_chance: float = 0.0
+    reason: str | None = None
+
+
+def msac_cost(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, threshold: float) -> np.ndarray:
+    """Truncated quadratic cost sum(min(d^2, t^2)) of (3, 3) or (M, 3, 3) models -> () or (M,)."""
+    d = _sed(F, pts1, pts2)
+    return np.minimum(d * d, threshold * threshold).sum(axis=-1)
+
+
+def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
+    """(N,) ||H x1 - x2|| in px (inf where H maps to infinity)."""
+    q = homogeneous(pts1) @ H.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        err = np.linalg.norm(q[:, :2] / q[:, 2:] - pts2, axis=1)
+    return np.nan_to_num(err, nan=np.inf)
+
+
+def parallax_models(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, pairs: np.ndarray):
+    """F = [e']_x H for (M, 2) index pairs of off-plane matches -> (M, 3, 3), unit norm.
+
+    The epipole e' in image 2 is the intersection of the lines through H x_i and x'_i (the
+    parallax lines) of the two matches.
+    """
+    x1 = homogeneous(pts1)
+    x2 = homogeneous(pts2)
+    hx = x1 @ H.T
+    lines = np.cross(hx, x2)  # (N, 3) parallax line of every match
+    e = np.cross(lines[pairs[:, 0]], lines[pairs[:, 1]])  # (M, 3)
+    ex = np.zeros((len(e), 3, 3))
+    ex[:, 0, 1], ex[:, 0, 2] = -e[:, 2], e[:, 1]
+    ex[:, 1, 0], ex[:, 1, 2] = e[:, 2], -e[:, 0]
+    ex[:, 2, 0], ex[:, 2, 1] = -e[:, 1], e[:, 0]
+    return normalize_fundamental(ex @ H)
+
+
+def plane_and_parallax(
+    F: np.ndarray,
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    threshold: float,
+    rng: np.random.Generator,
+    plane_share: float = 0.5,
+    max_candidates: int = 300,
+    min_excess: int = 8,
+    shuffles: int = 8,
+) -> PlaneCheck:
+    """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
+
+    Args:
+        F: (3, 3) the estimator's F (x2^T F x1 = 0).
+        pts1, pts2: (N, 2) all matches, px.
+        threshold: inlier threshold, px of symmetric epipolar distance (the estimator's).
+        rng: random generator (seeded by the caller) for the off-plane pairs and the H fit.
+        plane_share: a homography must explain this share of F's inliers to trigger the check.
+        max_candidates: off-plane pairs tried (all pairs when there are fewer).
+        min_excess: off-plane inliers needed beyond the chance count (see the module docstring).
+        shuffles: random re-pairings averaged for the chance count.
+    Returns:
+        A :class:`PlaneCheck`.
+    """
+    F = normalize_fundamental(F)
+    tol = 2.0 * threshold
+    inl = _sed(F, pts1, pts2) < threshold
+    out = PlaneCheck(F)
+    if np.count_nonzero(inl) < 8:
+        return out
+    # a robust H on all matches (the plane may hold matches F rejected); seeded via OpenCV's RNG
+    cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
+    H, _ = cv2.findHomography(pts1, pts2, cv2.RANSAC, tol, maxIters=500, confidence=0.995)
+    if H is None:
+        return out
+    on = transfer_error(H, pts1, pts2) < tol
+    out.plane_inliers = int(np.count_nonzero(on & inl))
+    out.off_plane_inliers = int(np.count_nonzero(~on & inl))
+    if out.plane_inliers < plane_share * np.count_nonzero(inl):
+        return out
+    out.planar = True
+    off = np.flatnonzero(~on)
+    if len(off) < 2:
+        out.reason = f"degenerate: dominant plane (all {len(pts1)} matches on one homography)"
+        return out
+    n_pairs = len(off) * (len(off) - 1) // 2
+    if n_pairs <= max_candidates:
+        i, j = np.triu_indices(len(off), 1)
+        pairs = np.stack([off[i], off[j]], axis=1)
+    else:
+        pairs = np.stack([rng.choice(off, 2, replace=False) for _ in range(max_candidates)])
+    models = parallax_models(H, pts1, pts2, pairs)
+    models = models[np.isfinite(models).all(axis=(1, 2))]
+    out.candidates = len(models)
+    if not len(models):
+        return out
+    costs = msac_cost(models, pts1, pts2, threshold)
+    best = models[int(np.argmin(costs))]
+    # polish the best candidate like the estimator polishes its final model
+    data = Correspondences.from_pixels(pts1, pts2)
+    options = [best, *iterative_refit(best, data, threshold)]
+    best_inl = _sed(best, pts1, pts2) < threshold
+    if np.count_nonzero(best_inl) >= 8:
+        options.append(fit_least_squares(pts1[best_inl], pts2[best_inl], irls_iterations=5))
+    options = np.stack(options)
+    option_costs = msac_cost(options, pts1, pts2, threshold)
+    k = int(np.argmin(option_costs))
+    if option_costs[k] < float(msac_cost(F, pts1, pts2, threshold)):
+        out.F = normalize_fundamental(options[k])
+        out.replaced = True
+        new_inl = _sed(out.F, pts1, pts2) < threshold
+        out.plane_inliers = int(np.count_nonzero(on & new_inl))
+        out.off_plane_inliers = int(np.count_nonzero(~on & new_inl))
+    out.off_plane_chance = chance_inliers(out.F, pts1[off], pts2[off], threshold, rng, shuffles)
+    excess = out.off_plane_inliers - out.off_plane_chance
+    if excess < max(min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)):
+        out.reason = (
+            f"degenerate: dominant plane ({out.plane_inliers} inliers on one homography, "
+            f"{out.off_plane_inliers} off it where {out.off_plane_chance:.1f} agree by chance)"
+        )
+    return out
+
+
+def chance_inliers(
+    F: np.ndarray,
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    threshold: float,
+    rng: np.random.Generator,
+    shuffles: int = 8,
+) -> float:
+    """Mean number of (N, 2) matches within ``threshold`` of F after pts2 is shuffled at random."""
+    n = len(pts1)
+    if n < 2:
+        return 0.0
+    perms = np.stack([rng.permutation(n) for _ in range(shuffles)])  # (S, N)
+    d = _sed(F, np.tile(pts1, (shuffles, 1)), pts2[perms.ravel()])
+    return float(np.count_nonzero(d < threshold)) / shuffles

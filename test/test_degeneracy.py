@@ -1,0 +1,126 @@
+"""The DEGENSAC-style dominant-plane check (sepfm_ros/geometry/degeneracy.py) on synthetic
+planar-majority scenes: most 3D points on one plane, a few off it, many outliers. Without the
+check the estimator often returns a wrong F with status "ok" (the plane fixes all but three of
+F's degrees of freedom and outliers outvote the few off-plane points); with it, such an F is
+either replaced by a plane-and-parallax F or flagged. Prints the counts.
+"""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
+from sepfm_ros.geometry.degeneracy import chance_inliers, parallax_models, plane_and_parallax
+from sepfm_ros.geometry.epipolar import fundamental_from_cameras
+from sepfm_ros.geometry.synthetic import look_at_camera
+
+SIZE = (640, 480)
+SEEDS = range(40)
+WRONG_PX = 2.0  # median distance of the true off-plane points to F's epipolar lines
+
+
+def _project(P: np.ndarray, X: np.ndarray) -> np.ndarray:
+    x = np.c_[X, np.ones(len(X))] @ P.T
+    return x[:, :2] / x[:, 2:]
+
+
+def planar_majority_pair(n_plane=170, n_off=20, n_out=80, noise=0.5, seed=0):
+    """Matches of a scene with ``n_plane`` points on one plane and ``n_off`` at least 0.5 m off
+    it (scene 5 m across, 6 m away), plus ``n_out`` random outliers; Gaussian noise in px.
+
+    Returns (pts1, pts2, true off-plane pts1, true off-plane pts2 (noise-free), GT F).
+    """
+    rng = np.random.default_rng(seed)
+    w, h = SIZE
+    K = np.array([[0.9 * w, 0, w / 2], [0, 0.9 * w, h / 2], [0, 0, 1.0]])
+    target = np.array([0.0, 0.0, 6.0])
+    c1 = rng.normal(0, 0.3, 3)
+    d = rng.normal(0, 1, 3)
+    d[2] *= 0.3
+    c2 = c1 + d / np.linalg.norm(d)
+    P1 = look_at_camera(K, c1, target + rng.normal(0, 0.2, 3))
+    P2 = look_at_camera(K, c2, target + rng.normal(0, 0.2, 3))
+    normal = rng.normal(0, 1, 3)
+    normal[2] += 2.0
+    normal /= np.linalg.norm(normal)
+    a = np.cross(normal, [1.0, 0, 0])
+    a /= np.linalg.norm(a)
+    b = np.cross(normal, a)
+
+    def visible(X):
+        ok = np.ones(len(X), bool)
+        for P in (P1, P2):
+            x = _project(P, X)
+            depth = np.c_[X, np.ones(len(X))] @ P[2]
+            ok &= (depth > 0) & (x[:, 0] > 1) & (x[:, 0] < w - 2)
+            ok &= (x[:, 1] > 1) & (x[:, 1] < h - 2)
+        return ok
+
+    def sample(m, on_plane):
+        out = np.zeros((0, 3))
+        while len(out) < m:
+            if on_plane:
+                st = rng.uniform(-2.5, 2.5, (4 * m, 2))
+                X = target + st[:, :1] * a + st[:, 1:] * b
+            else:
+                X = target + rng.uniform(-2.5, 2.5, (4 * m, 3))
+                X = X[np.abs((X - target) @ normal) > 0.5]
+            out = np.concatenate([out, X[visible(X)]])
+        return out[:m]
+
+    X = np.concatenate([sample(n_plane, True), sample(n_off, False)])
+    x1, x2 = _project(P1, X), _project(P2, X)
+    o1 = rng.uniform([0, 0], [w - 1, h - 1], (n_out, 2))
+    o2 = rng.uniform([0, 0], [w - 1, h - 1], (n_out, 2))
+    pts1 = np.r_[x1 + rng.normal(0, noise, x1.shape), o1]
+    pts2 = np.r_[x2 + rng.normal(0, noise, x2.shape), o2]
+    return pts1, pts2, x1[n_plane:], x2[n_plane:], fundamental_from_cameras(P1, P2)
+
+
+def test_parallax_model_from_exact_plane_and_two_points_is_the_true_f():
+    pts1, pts2, off1, off2, F_gt = planar_majority_pair(n_out=0, noise=0.0, seed=3)
+    H, _ = cv2.findHomography(pts1[:170], pts2[:170], 0)
+    F = parallax_models(H, np.r_[off1[:2]], np.r_[off2[:2]], np.array([[0, 1]]))[0]
+    assert np.median(symmetric_epipolar_distance(F, off1, off2)) < 1e-4
+    assert np.median(symmetric_epipolar_distance(F, pts1, pts2)) < 1e-4
+
+
+def test_chance_count_matches_random_pairs():
+    rng = np.random.default_rng(0)
+    pts1, pts2, _, _, F_gt = planar_majority_pair(n_out=0, noise=0.0, seed=1)
+    exact = int(np.count_nonzero(symmetric_epipolar_distance(F_gt, pts1, pts2) < 1.0))
+    chance = chance_inliers(F_gt, pts1, pts2, 1.0, rng)
+    assert exact == len(pts1) and chance < 0.1 * len(pts1)
+
+
+@pytest.mark.parametrize(("n_off", "n_out"), [(20, 80), (10, 30)])
+def test_plane_check_removes_confident_wrong_f(n_off, n_out):
+    counts = {"without": {"wrong_ok": 0, "right_ok": 0}, "with": {"wrong_ok": 0, "right_ok": 0}}
+    for seed in SEEDS:
+        pts1, pts2, off1, off2, _ = planar_majority_pair(n_off=n_off, n_out=n_out, seed=seed)
+        for name, check in (("without", False), ("with", True)):
+            est = estimate_fundamental(pts1, pts2, SIZE, seed=seed, plane_check=check)
+            assert est.F is not None
+            err = float(np.median(symmetric_epipolar_distance(est.F, off1, off2)))
+            if est.status == "ok":
+                counts[name]["wrong_ok" if err > WRONG_PX else "right_ok"] += 1
+            else:
+                assert est.status.startswith("degenerate"), est.status
+    print(f"\n[robustness] plane check, {n_off} off-plane, {n_out} outliers, 170 on the plane, "
+          f"{len(SEEDS)} scenes: {counts}")  # fmt: skip
+    assert counts["without"]["wrong_ok"] >= 8  # the scene is hard without the check
+    assert counts["with"]["wrong_ok"] <= counts["without"]["wrong_ok"] // 4
+    assert counts["with"]["right_ok"] >= counts["without"]["right_ok"] - 2
+
+
+def test_plane_check_keeps_general_scenes():
+    from sepfm_ros.geometry.synthetic import make_pair
+
+    for seed in range(10):
+        pair = make_pair(n_inliers=150, n_outliers=60, noise=0.5, seed=seed)
+        est = estimate_fundamental(pair.pts1, pair.pts2, pair.image_size, seed=seed)
+        assert est.status == "ok", est.status
+        check = plane_and_parallax(est.F, pair.pts1, pair.pts2, 1.0, np.random.default_rng(seed))
+        assert not check.replaced and check.reason is None

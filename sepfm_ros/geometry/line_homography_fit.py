@@ -16,6 +16,7 @@ from sepfm_ros.geometry.fundamental_problem import score_distances
 from sepfm_ros.geometry.line_pairs import LinePair, control_points, line_parameter
 from sepfm_ros.geometry.ransac import run_ransac
 from sepfm_ros.geometry.solvers.line_homography import (
+    inverse,
     line_homography_3pt,
     line_homography_lsq,
     transfer,
@@ -64,8 +65,7 @@ class LineHomographyProblem:
     def errors(self, H: np.ndarray) -> np.ndarray:
         """(M, 2, 2) -> (M, K) symmetric transfer error along the lines, working px."""
         fwd = np.abs(transfer(H, self.t1) - self.t2) * self.len2
-        Hinv = np.linalg.pinv(H)
-        bwd = np.abs(transfer(Hinv, self.t2) - self.t1) * self.len1
+        bwd = np.abs(transfer(inverse(H), self.t2) - self.t1) * self.len1
         e = 0.5 * (fwd + bwd)
         return np.where(np.isfinite(e), e, np.inf)
 

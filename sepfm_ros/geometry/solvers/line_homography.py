@@ -48,9 +48,24 @@ def transfer(H: np.ndarray, t: np.ndarray) -> np.ndarray:
     Returns:
         (M, N) or (N,) parameters t' on line 2 (inf where the image point is at infinity).
     """
-    ab = np.stack([1.0 - t, t], axis=-1)  # (N, 2)
-    out = np.einsum("...ij,nj->...ni", H, ab)
-    den = out[..., 0] + out[..., 1]
+    H = np.asarray(H, dtype=np.float64)
+    single = H.ndim == 2
+    Hs = H[None] if single else H
+    # (alpha', beta') = H (1 - t, t): linear in t
+    a = Hs[:, 0, 0, None] + (Hs[:, 0, 1, None] - Hs[:, 0, 0, None]) * t
+    b = Hs[:, 1, 0, None] + (Hs[:, 1, 1, None] - Hs[:, 1, 0, None]) * t
+    den = a + b
     with np.errstate(divide="ignore", invalid="ignore"):
-        tp = out[..., 1] / den
-    return np.where(np.isfinite(tp), tp, np.inf)
+        tp = b / den
+    tp = np.where(np.isfinite(tp), tp, np.inf)
+    return tp[0] if single else tp
+
+
+def inverse(H: np.ndarray) -> np.ndarray:
+    """Inverse line homographies up to scale (the adjugate), (..., 2, 2) -> (..., 2, 2)."""
+    out = np.empty_like(H)
+    out[..., 0, 0] = H[..., 1, 1]
+    out[..., 0, 1] = -H[..., 0, 1]
+    out[..., 1, 0] = -H[..., 1, 0]
+    out[..., 1, 1] = H[..., 0, 0]
+    return out

@@ -14,6 +14,7 @@ Figures are measured on this machine in this run; nothing is asserted.
 from __future__ import annotations
 
 import argparse
+import os
 import sys
 import time
 from pathlib import Path
@@ -110,6 +111,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", default="0", help="comma-separated seeds")
     ap.add_argument("--ratios", default="0.75,0.95")
     ap.add_argument("--out", type=Path, default=None, help="also write the report here (.md)")
+    ap.add_argument(
+        "--readme",
+        type=Path,
+        default=None,
+        help="replace the text between <!-- bench-estimators:start/end --> in this file",
+    )
     a = ap.parse_args(argv)
     if not (DATA / "pairs.json").is_file():
         print(f"shared data not found at {DATA}", file=sys.stderr)
@@ -125,6 +132,17 @@ def main(argv: list[str] | None = None) -> int:
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
         a.out.write_text("\n".join(text) + "\n")
+    if a.readme:
+        start, end = "<!-- bench-estimators:start -->", "<!-- bench-estimators:end -->"
+        doc = a.readme.read_text()
+        if start not in doc or end not in doc:
+            print(f"{a.readme} has no {start} ... {end} markers", file=sys.stderr)
+            return 2
+        load = os.getloadavg()[0]
+        body = "\n".join(text).replace("## Estimator benchmark", "#### Estimator benchmark", 1)
+        body += f"\n(load average at the end of the run: {load:.1f} on {os.cpu_count()} cores)\n"
+        head, rest = doc.split(start, 1)
+        a.readme.write_text(head + start + "\n" + body + "\n" + end + rest.split(end, 1)[1])
     return 0
 
 

@@ -78,7 +78,13 @@ class NodeProcess:
 class Client:
     """Publishes inputs to one node and collects its outputs, keyed by output stamp (ns)."""
 
-    def __init__(self, ros, node_name: str, inputs: dict[str, tuple[str, type]]) -> None:
+    def __init__(
+        self,
+        ros,
+        node_name: str,
+        inputs: dict[str, tuple[str, type]],
+        input_qos: QoSProfile = RELIABLE,
+    ) -> None:
         self.ros = ros
         self.node_name = node_name
         self.lock = threading.Lock()
@@ -88,7 +94,7 @@ class Client:
         self.debug: dict[int, Image] = {}
         self.health: list[dict[str, str]] = []
         self.pubs = {
-            key: ros.node.create_publisher(msg_type, topic, RELIABLE)
+            key: ros.node.create_publisher(msg_type, topic, input_qos)
             for key, (topic, msg_type) in inputs.items()
         }
         prefix = f"/{node_name}"
@@ -293,9 +299,10 @@ def image_msg(gray: np.ndarray, stamp: int, encoding: str = "mono8", pad: int = 
     )
 
 
-def start_node(name, tmp, ros, inputs, *args):
+def start_node(name, tmp, ros, inputs, *args, input_qos: QoSProfile = RELIABLE):
+    """Start a node subprocess and a connected :class:`Client` for it."""
     proc = NodeProcess(name, tmp, *args)
-    client = Client(ros, name, inputs)
+    client = Client(ros, name, inputs, input_qos)
     try:
         client.wait_connected()
     except AssertionError:

@@ -7,6 +7,7 @@ Shared by the live node, offline bag processing and bag recording (serialize the
 - :func:`matches_to_pointcloud2`: all putative matches as sensor_msgs/PointCloud2 with float32
   fields u_a, v_a, u_b, v_b, error (symmetric epipolar distance, px) and uint8 inlier, on_line.
 - :func:`estimate_info`: diagnostic_msgs/DiagnosticArray describing one estimate.
+- :func:`failure_info`: the same for a pair that could not be processed (bad input), ERROR level.
 - :func:`health_status`: a diagnostic_msgs/DiagnosticStatus from name/value pairs.
 """
 
@@ -236,6 +237,49 @@ def estimate_info(
         DiagnosticStatus.OK if ok else DiagnosticStatus.WARN,
         "ok" if ok else result.estimate.status,
         estimate_values(result, stamp_a, stamp_b, features, extra_timings_ms),
+        hardware_id=node_name,
+    )
+    return diagnostic_array(header, [status])
+
+
+def failure_info(
+    header: Header,
+    stamp_a: Time,
+    stamp_b: Time,
+    reason: str,
+    kind: str,
+    features: str,
+    method: str,
+    node_name: str = "sepfm",
+) -> DiagnosticArray:
+    """~/estimate_info for a pair that never reached the estimator (e.g. an undecodable image).
+
+    Level ERROR, message ``reason``; the values of :func:`estimate_info` with zero counts, plus
+    ``error_kind`` (the bad-input kind counted in /diagnostics). No F and no matches are published
+    for such a pair, so every pair the node took still gets exactly one answer.
+    """
+    values: dict[str, Any] = {
+        "stamp_a": f"{int(stamp_a.sec)}.{int(stamp_a.nanosec):09d}",
+        "stamp_b": f"{int(stamp_b.sec)}.{int(stamp_b.nanosec):09d}",
+        "method": method,
+        "features": features,
+        "status": f"bad input ({kind}): {reason}",
+        "error_kind": kind,
+        "matches": 0,
+        "inliers": 0,
+        "hypotheses": 0,
+        "stage1_hypotheses": 0,
+        "stage2_hypotheses": 0,
+        "fallback": False,
+        "line_inliers": 0,
+        "line_a": "none",
+        "line_b": "none",
+    }
+    status = health_status(
+        ESTIMATE_STATUS_NAME,
+        DiagnosticStatus.ERROR,
+        values["status"],
+        values,
         hardware_id=node_name,
     )
     return diagnostic_array(header, [status])

@@ -15,6 +15,8 @@ running several estimations at once on 2 cores would only raise everyone's laten
 from __future__ import annotations
 
 import argparse
+import ctypes
+import ctypes.util
 import threading
 import time
 import traceback
@@ -46,6 +48,7 @@ from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
+    check_compressed,
     check_image,
     message_to_numpy,
     numpy_to_image,
@@ -54,6 +57,7 @@ from sepfm_ros.ros.messages import (
     copy_header,
     diagnostic_array,
     estimate_info,
+    failure_info,
     fundamental_to_image,
     health_status,
     result_to_pointcloud2,
@@ -122,7 +126,17 @@ PARAMS: dict[str, ParamSpec] = {
     "diagnostics_period_s": ParamSpec(
         1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
     ),
+    "input_timeout_s": ParamSpec(
+        0.5,
+        "stereo: a camera silent this much longer than the other one turns /diagnostics to WARN"
+        " (reported at once, and back to OK when it returns)",
+        0.05,
+        60.0,
+    ),
 }
+
+# How often input silence is checked (a change of the health level is reported at once).
+STALL_CHECK_PERIOD_S = 0.1
 
 PIPELINE_PARAMS = {
     "features": "features",
@@ -199,6 +213,31 @@ class Job:
     key_b: Any
 
 
+def _load_malloc_trim():
+    """glibc's malloc_trim (None elsewhere): hands freed heap pages back to the system."""
+    try:
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
+        trim = libc.malloc_trim
+    except (OSError, AttributeError):
+        return None
+    trim.argtypes = [ctypes.c_size_t]
+    trim.restype = ctypes.c_int
+    return trim
+
+
+_MALLOC_TRIM = _load_malloc_trim()
+
+
+def release_free_memory() -> None:
+    """Return freed heap memory to the system (glibc only; a no-op elsewhere).
+
+    Images of many different sizes (e.g. a stream of malformed messages) leave the C heap
+    fragmented: freed but unreturned pages that show up as resident memory growth.
+    """
+    if _MALLOC_TRIM is not None:
+        _MALLOC_TRIM(0)
+
+
 def _percentile(values: list[float], q: float) -> float:
     return float(np.percentile(values, q)) if values else float("nan")
 
@@ -243,6 +282,9 @@ class SepfmNode(Node):
         self._wait_ms: deque[float] = deque(maxlen=500)
         self._max_wait_ms = 0.0
         self._last_report = (time.monotonic(), Counter(), 0)
+        self._last_input: dict[str, float] = {}  # topic -> time.monotonic() of the last message
+        self._input_timeout_s = float(values["input_timeout_s"])
+        self._reported_stall: str | None = None  # stall reason of the last health report
 
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._pub_f = self.create_publisher(Image, "~/fundamental", reliable)
@@ -285,6 +327,7 @@ class SepfmNode(Node):
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
+        self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
         self._worker = threading.Thread(target=self._work, name="sepfm-worker", daemon=True)
         self._worker.start()
         self.get_logger().info(
@@ -326,6 +369,7 @@ class SepfmNode(Node):
             self._pending_config = config
             self._epipolar_lines = int(values["debug_epipolar_lines"])
             self._publish_unreliable = bool(values["publish_unreliable"])
+            self._input_timeout_s = float(values["input_timeout_s"])
             self._sync.configure(
                 int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"])
             )
@@ -354,8 +398,8 @@ class SepfmNode(Node):
         try:
             if self._transport == "raw":
                 check_image(msg)
-            elif len(msg.data) == 0:
-                raise ImageDecodeError("zero_size", "compressed image has no data")
+            else:
+                check_compressed(msg)
         except ImageDecodeError as err:
             self._bad_input(err.kind, f"{topic}: {err}")
             return False
@@ -374,6 +418,7 @@ class SepfmNode(Node):
         topic = "left" if side == LEFT else "right"
         with self._lock:
             self._received[topic] += 1
+            self._last_input[topic] = received
         if not self._precheck(msg, topic):
             return
         with self._lock:
@@ -396,6 +441,7 @@ class SepfmNode(Node):
         received = time.monotonic()
         with self._lock:
             self._received["image"] += 1
+            self._last_input["image"] = received
         if not self._precheck(msg, "image"):
             return
         stamp = stamp_ns(msg.header.stamp)
@@ -430,9 +476,30 @@ class SepfmNode(Node):
                 self._process(job)
             except ImageDecodeError as err:
                 self._bad_input(err.kind, str(err))
+                self._publish_failure(job, err.kind, str(err))
             except Exception as err:  # keep serving; count and log once per kind
                 kind = f"internal_{type(err).__name__}"
                 self._bad_input(kind, "".join(traceback.format_exception(err)))
+                self._publish_failure(job, kind, f"{type(err).__name__}: {err}")
+
+    def _publish_failure(self, job: Job, kind: str, reason: str) -> None:
+        """Answer a pair that could not be processed on ~/estimate_info (ERROR level)."""
+        try:
+            config = self._pipeline.config
+            self._pub_info.publish(
+                failure_info(
+                    job.header,
+                    job.msg_a.header.stamp,
+                    job.msg_b.header.stamp,
+                    reason,
+                    kind,
+                    config.features,
+                    config.method,
+                    node_name=self.get_fully_qualified_name(),
+                )
+            )
+        except Exception as err:  # noqa: BLE001 - e.g. shutting down; never kill the worker
+            self._bad_input(f"internal_{type(err).__name__}", f"cannot publish a failure: {err}")
 
     def _process(self, job: Job) -> None:
         started = time.monotonic()
@@ -511,13 +578,53 @@ class SepfmNode(Node):
             values["errors_total"] = sum(self._errors.values())
             for kind, count in sorted(self._errors.items()):
                 values[f"errors_{kind}"] = count
+            for topic, age in self._input_ages(now).items():
+                values[f"input_age_{topic}_s"] = age
             self._last_report = (now, Counter(self._received), self._published)
         return values
 
+    def _input_ages(self, now: float) -> dict[str, float]:
+        """topic -> seconds since its last message (only topics that have sent one)."""
+        return {topic: now - t for topic, t in self._last_input.items()}
+
+    def _stall(self, now: float) -> str | None:
+        """Why the input looks stalled, or None (caller holds the lock)."""
+        ages = self._input_ages(now)
+        timeout = self._input_timeout_s
+        if self._mode == "stereo":
+            for topic, other in (("left", "right"), ("right", "left")):
+                if topic not in ages and other in ages and ages[other] < timeout:
+                    since = now - min(self._last_input.values())
+                    if since > timeout:
+                        return f"no {topic} images yet, {other} images arriving"
+                if topic in ages and other in ages and ages[topic] - ages[other] > timeout:
+                    return (
+                        f"{topic} camera silent for {ages[topic]:.1f} s while {other} images "
+                        "arrive: no pairs"
+                    )
+        return None
+
+    def _level(self, values: dict[str, Any], stall: str | None) -> tuple[bytes, str]:
+        if stall is not None:
+            return DiagnosticStatus.WARN, stall
+        if values["errors_total"]:
+            return DiagnosticStatus.WARN, f"{values['errors_total']} bad inputs skipped"
+        return DiagnosticStatus.OK, "ok"
+
+    def _check_level_change(self) -> None:
+        """Report at once when one camera stalls or comes back (between periodic reports)."""
+        with self._lock:
+            stall = self._stall(time.monotonic())
+        if (stall is None) != (self._reported_stall is None):
+            self._report_health()
+
     def _report_health(self) -> None:
+        release_free_memory()
         values = self.health()
-        level = DiagnosticStatus.WARN if values["errors_total"] else DiagnosticStatus.OK
-        message = f"{values['errors_total']} bad inputs skipped" if values["errors_total"] else "ok"
+        with self._lock:
+            stall = self._stall(time.monotonic())
+        level, message = self._level(values, stall)
+        self._reported_stall = stall
         status = health_status(
             f"{self.get_name()}: node", level, message, values, self.get_fully_qualified_name()
         )

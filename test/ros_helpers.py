@@ -93,6 +93,8 @@ class Client:
         self.info: dict[int, DiagnosticStatus] = {}
         self.debug: dict[int, Image] = {}
         self.health: list[dict[str, str]] = []
+        self.info_time: dict[int, float] = {}  # output stamp -> time.monotonic() of receipt
+        self.health_log: list[tuple[float, int, str]] = []  # (receipt time, level, message)
         self.pubs = {
             key: ros.node.create_publisher(msg_type, topic, input_qos)
             for key, (topic, msg_type) in inputs.items()
@@ -127,12 +129,15 @@ class Client:
             for status in msg.status:
                 if status.name == ESTIMATE_STATUS_NAME:
                     self.info[stamp_ns(msg.header.stamp)] = status
+                    self.info_time[stamp_ns(msg.header.stamp)] = time.monotonic()
 
     def _on_diagnostics(self, msg):
         with self.lock:
             for status in msg.status:
                 if status.name == f"{self.node_name}: node":
                     self.health.append(status_values(status))
+                    level = int.from_bytes(status.level, "little")
+                    self.health_log.append((time.monotonic(), level, status.message))
 
     def subscribe_debug(self):
         self.subs.append(

@@ -8,8 +8,11 @@ comes from a seeded generator.
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 
+import cv2
 import numpy as np
 import pytest
 from robustness_report import Figures
@@ -19,6 +22,7 @@ rclpy = pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_helpers import (  # noqa: E402
+    RELIABLE,
     Ros,
     header,
     image_msg,
@@ -36,10 +40,16 @@ from sepfm_ros.ros.image_conversion import (  # noqa: E402
     numpy_to_compressed,
     pixel_layout,
 )
-from sepfm_ros.synthetic.scene import (  # noqa: E402  # noqa: E402
+from sepfm_ros.synthetic.scene import (  # noqa: E402
+    Camera,
+    Scene,
+    intrinsics,
+    look_at,
     make_texture,
+    plane_at,
+    render,
 )
-from sepfm_ros.synthetic.sequences import stereo_sequence  # noqa: E402
+from sepfm_ros.synthetic.sequences import stereo_sequence, street_scene  # noqa: E402
 
 SEED = 20261122
 SIZE = (320, 240)  # small frames keep the suite fast; the node's work per pair is the same kind
@@ -473,3 +483,324 @@ def test_fuzz_compressed_images(ros, tmp_path, frames, figures):
         )
     finally:
         proc.stop()
+
+
+# --------------------------------------------------------------------------- one shared node
+@pytest.fixture(scope="module")
+def robust(ros, tmp_path_factory):
+    """A stereo node with the node's own input QoS (sensor data, keep-last), made reliable."""
+    proc, client = stereo_node("robust", tmp_path_factory.mktemp("robust"), ros, input_qos=RELIABLE)
+    yield proc, client
+    proc.stop()
+
+
+def pair_msgs(images, stamp):
+    return image_msg(images[0], stamp), image_msg(images[1], stamp)
+
+
+def latency_ms(client, stamps, sent_at):
+    """End-to-end latency (publish in this process -> ~/estimate_info back), ms, answered only."""
+    with client.lock:
+        return [1e3 * (client.info_time[s] - sent_at[s]) for s in stamps if s in client.info_time]
+
+
+# --------------------------------------------------------------------------- degenerate geometry
+def degenerate_scenes(seed: int = 5) -> dict[str, tuple[np.ndarray, np.ndarray]]:
+    """Image pairs (SIZE, mono8) whose two-view geometry is degenerate or undetermined."""
+    rng = np.random.default_rng(seed)
+    K = intrinsics(SIZE, 70.0)
+    street = street_scene(seed)
+    c = np.array([0.0, -0.2, 1.0])
+    cams = [look_at(c, c + np.array(d)) for d in ((0.0, 0.0, 10.0), (0.9, 0.1, 10.0))]
+    rotation = tuple(render(street, Camera(K, R, t, SIZE)) for R, t in cams)
+    texture = make_texture(rng, (640, 480))
+    wall = Scene((plane_at((0.0, 0.0, 6.0), (1, 0.1, 0.3), (0, 1, 0), 8.0, texture),))
+    cams = [
+        look_at(np.array([0.0, 0.0, 0.0]), np.array([0.0, 0.0, 6.0])),
+        look_at(np.array([0.4, 0.05, 0.1]), np.array([0.1, 0.0, 6.0])),
+    ]
+    plane = tuple(render(wall, Camera(K, R, t, SIZE)) for R, t in cams)
+    line = np.full(SIZE[::-1], 90, np.uint8)
+    line[118:121, 20:-20] = rng.integers(0, 256, (3, SIZE[0] - 40))
+    dot = np.full(SIZE[::-1], 90, np.uint8)
+    cv2.circle(dot, (160, 120), 3, 200, -1)
+    dot = cv2.GaussianBlur(dot, (5, 5), 0)
+    frame = stereo_sequence(n_frames=1, size=SIZE, seed=3)[0].images[0]
+    blank = np.full(SIZE[::-1], 90, np.uint8)
+    return {
+        "identical_frames": (frame, frame.copy()),
+        "pure_rotation": rotation,
+        "single_plane": plane,
+        "matches_on_one_line": (line, np.roll(line, 6, axis=1)),
+        "fewer_than_8_matches": (dot, np.roll(dot, 5, axis=1)),
+        "textureless": (blank, blank.copy()),
+    }
+
+
+def test_degenerate_geometry_gives_no_f_or_a_flagged_f(robust, figures):
+    proc, client = robust
+    outcomes = {}
+    for name, images in degenerate_scenes().items():
+        stamp = next_stamp()
+        send_pair(client, *pair_msgs(images, stamp))
+        values, F, _ = client.wait_outputs(stamp, need_f=False)
+        outcomes[name] = values["status"]
+        if F is None:
+            assert values["status"] != "ok", name
+        else:  # published only flagged: WARN level with the reason
+            assert values["status"].startswith("degenerate"), (name, values["status"])
+            assert values["_level"] == DiagnosticStatus.WARN and values["_msg"] == values["status"]
+    figures.add("degenerate_geometry", **outcomes)
+    assert proc.proc.poll() is None
+    assert "Traceback" not in proc.output()
+
+
+# --------------------------------------------------------------------------- parameters
+def test_invalid_runtime_parameters_rejected_node_keeps_working(robust, frames):
+    """Extends test_node_live's parameter test with the issue's cases (negative thresholds,
+    zero features, unknown method) and more; every rejection names the parameter."""
+    _, client = robust
+    before = {n: client.get_parameter(n) for n in ("threshold_px", "max_features", "method")}
+    rejected = 0
+    for name, value in [
+        ("threshold_px", -1.0),
+        ("threshold_px", 0.0),
+        ("max_features", 0),
+        ("max_features", -100),
+        ("method", "unknown"),
+        ("method", ""),
+        ("confidence", 1.5),
+        ("ratio", 0.0),
+        ("sync_slop_s", -0.1),
+        ("input_timeout_s", 0.0),
+        ("frame_gap", 0),
+        ("max_matches", -1),
+        ("seed", -3),
+    ]:
+        ok, reason = client.set_parameter(name, value)
+        assert not ok, f"{name}={value!r} accepted"
+        assert name in reason, reason
+        rejected += 1
+    ok, reason = client.set_parameter("threshold_px", "loose")  # rclpy's own type check
+    assert not ok and "type" in reason, reason
+    assert {n: client.get_parameter(n) for n in before} == before
+    stamp = next_stamp()
+    send_pair(client, *pair_msgs(frames[0], stamp))
+    values, F, _ = client.wait_outputs(stamp)
+    assert F is not None and values["status"] == "ok"
+
+
+# --------------------------------------------------------------------------- a camera stops
+def test_stereo_camera_stops_warns_within_2s_and_resumes(robust, frames, figures):
+    _, client = robust
+    period = 0.25  # 4 pairs/s: under the node's processing rate, so none is dropped
+
+    def stream(seconds, sides):
+        stamps = []
+        t_end = time.monotonic() + seconds
+        last = None
+        while time.monotonic() < t_end:
+            stamp = next_stamp()
+            left, right = pair_msgs(frames[len(stamps) % len(frames)], stamp)
+            if "left" in sides:
+                client.publish("left", left)
+            if "right" in sides:
+                client.publish("right", right)
+                last = time.monotonic()
+            stamps.append(stamp)
+            time.sleep(period)
+        return stamps, last
+
+    stream(2.0, ("left", "right"))
+    with client.lock:
+        n_log = len(client.health_log)
+    _, _ = stream(0.0, ())
+    t_stop = time.monotonic()  # the right camera's last image went out in the call before
+    stream(3.0, ("left",))
+    with client.lock:
+        log = client.health_log[n_log:]
+    warn = [(t, msg) for t, level, msg in log if level >= 1 and "right camera silent" in msg]
+    assert warn, log
+    delay = warn[0][0] - t_stop
+    with client.lock:
+        n_log = len(client.health_log)
+    t_back = time.monotonic()
+    stamps, _ = stream(2.0, ("left", "right"))
+    client.wait_info(stamps[-1])
+    with client.lock:
+        answered = sum(s in client.info for s in stamps)
+        back = [(t, lv, m) for t, lv, m in client.health_log[n_log:] if "silent" not in m]
+    recovered = back[0][0] - t_back if back else float("nan")
+    figures.add(
+        "camera_stop",
+        warn_after_s=round(delay, 2),
+        warn_message=warn[0][1],
+        pairs_after_return=len(stamps),
+        answered_after_return=answered,
+        ok_again_after_s=round(recovered, 2),
+    )
+    assert delay < 2.0
+    assert back, "diagnostics did not leave the stall state after the camera returned"
+    assert answered >= len(stamps) - 2  # the first pairs may meet the pairing's late/unmatched
+
+
+# --------------------------------------------------------------------------- DDS peers churn
+PEER = """
+import sys, time, rclpy
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image, PointCloud2
+from diagnostic_msgs.msg import DiagnosticArray
+rclpy.init()
+node = rclpy.create_node("churn_peer")
+q = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+ns = sys.argv[1]
+subs = [node.create_subscription(t, ns + n, lambda m: None, q) for t, n in (
+    (Image, "/fundamental"), (PointCloud2, "/matches"), (DiagnosticArray, "/estimate_info"),
+    (Image, "/debug_image"))]
+print("up", flush=True)
+rclpy.spin(node)
+"""
+
+
+def test_dds_peer_started_and_killed_repeatedly_does_not_disturb_node(robust, frames, figures):
+    proc, client = robust
+    rng = np.random.default_rng(SEED + 2)
+    # baseline latency, one pair at a time
+    sent_at, stamps = {}, []
+    for k in range(10):
+        stamp = next_stamp()
+        sent_at[stamp] = time.monotonic()
+        send_pair(client, *pair_msgs(frames[k % len(frames)], stamp))
+        client.wait_info(stamp)
+        stamps.append(stamp)
+    base_p95 = float(np.percentile(latency_ms(client, stamps, sent_at), 95))
+    before = client.latest_health(after=0.0)
+    peers, kills, stamps = [], 0, []
+    t_end = time.monotonic() + 20.0
+    peer = None
+    next_change = time.monotonic()
+    while time.monotonic() < t_end:
+        now = time.monotonic()
+        if now >= next_change:
+            if peer is not None:
+                peer.kill()  # SIGKILL: no goodbye to DDS discovery
+                peer.wait()
+                kills += 1
+            peer = subprocess.Popen(
+                [sys.executable, "-c", PEER, "/robust"],
+                stdout=subprocess.DEVNULL,
+                stderr=subprocess.DEVNULL,
+            )
+            peers.append(peer)
+            next_change = now + float(rng.uniform(0.5, 2.5))
+        stamp = next_stamp()
+        sent_at[stamp] = time.monotonic()
+        send_pair(client, *pair_msgs(frames[len(stamps) % len(frames)], stamp))
+        stamps.append(stamp)
+        time.sleep(0.4)
+    if peer is not None:
+        peer.kill()
+        peer.wait()
+        kills += 1
+    client.wait_info(stamps[-1])
+    after = client.latest_health(after=1.2)
+    lat = latency_ms(client, stamps, sent_at)
+    answered = len(lat)
+    dropped = int(after["dropped_pairs"]) - int(before["dropped_pairs"])
+    figures.add(
+        "dds_peer_churn",
+        peers_started=len(peers),
+        peers_killed=kills,
+        pairs_sent=len(stamps),
+        pairs_answered=answered,
+        dropped_pairs=dropped,
+        latency_p95_ms_baseline=round(base_p95, 1),
+        latency_p95_ms_during_churn=round(float(np.percentile(lat, 95)), 1),
+    )
+    assert proc.proc.poll() is None
+    assert answered + dropped == len(stamps)
+    assert answered >= 0.9 * len(stamps)
+    assert "Traceback" not in proc.output()
+
+
+# --------------------------------------------------------------------------- overload
+OVERLOAD_S = 60.0
+RECOVERY_S = 10.0
+
+
+def _paced(client, frames, rate_hz, seconds, sent_at, rss_pid=None, rss=None):
+    stamps = []
+    t0 = time.monotonic()
+    k = 0
+    while True:
+        target = t0 + k / rate_hz
+        if target - t0 >= seconds:
+            break
+        delay = target - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        stamp = next_stamp()
+        sent_at[stamp] = time.monotonic()
+        send_pair(client, *pair_msgs(frames[k % len(frames)], stamp))
+        stamps.append(stamp)
+        if rss is not None and k % max(1, int(rate_hz * 5)) == 0:
+            rss.append(round(rss_mb(rss_pid), 1))
+        k += 1
+    return stamps
+
+
+def test_overload_at_twice_the_processing_rate(robust, frames, figures):
+    proc, client = robust
+    sent_at: dict[int, float] = {}
+    # unloaded: one pair at a time
+    stamps = []
+    for k in range(30):
+        stamp = next_stamp()
+        sent_at[stamp] = time.monotonic()
+        send_pair(client, *pair_msgs(frames[k % len(frames)], stamp))
+        client.wait_info(stamp)
+        stamps.append(stamp)
+    unloaded = latency_ms(client, stamps, sent_at)
+    p95_unloaded = float(np.percentile(unloaded, 95))
+    rate = 1000.0 / float(np.mean(unloaded))  # pairs/s the node sustains one after another
+    before = client.latest_health(after=0.0)
+    rss = [round(rss_mb(proc.proc.pid), 1)]
+    loaded = _paced(client, frames, 2.0 * rate, OVERLOAD_S, sent_at, proc.proc.pid, rss)
+    time.sleep(1.0)
+    rss.append(round(rss_mb(proc.proc.pid), 1))
+    mid = client.latest_health(after=1.2)
+    lat_loaded = latency_ms(client, loaded, sent_at)
+    # the load falls: half the processing rate
+    recovery = _paced(client, frames, 0.5 * rate, RECOVERY_S, sent_at)
+    client.wait_info(recovery[-1])
+    after = client.latest_health(after=1.2)
+    lat_recovery = latency_ms(client, recovery, sent_at)
+    dropped = int(mid["dropped_pairs"]) - int(before["dropped_pairs"])
+    paired = int(mid["synchronized_pairs"]) - int(before["synchronized_pairs"])
+    dropped_recovery = int(after["dropped_pairs"]) - int(mid["dropped_pairs"])
+    p95_loaded = float(np.percentile(lat_loaded, 95))
+    figures.add(
+        "overload",
+        processing_rate_hz=round(rate, 2),
+        input_rate_hz=round(2.0 * rate, 2),
+        duration_s=OVERLOAD_S,
+        pairs_sent=len(loaded),
+        pairs_reaching_node=paired,
+        pairs_answered=len(lat_loaded),
+        pairs_dropped_counted=dropped,
+        node_dropped_pairs_reported=int(mid["dropped_pairs"]),
+        latency_p95_ms_unloaded=round(p95_unloaded, 1),
+        latency_p95_ms_loaded=round(p95_loaded, 1),
+        latency_max_ms_loaded=round(max(lat_loaded), 1),
+        rss_trace_mb_every_5s=rss,
+        rss_growth_mb=round(rss[-1] - rss[0], 1),
+        recovery_rate_hz=round(0.5 * rate, 2),
+        recovery_pairs_sent=len(recovery),
+        recovery_pairs_answered=len(lat_recovery),
+        recovery_dropped=dropped_recovery,
+    )
+    assert proc.proc.poll() is None
+    assert rss[-1] - rss[0] < RSS_LIMIT_MB
+    assert p95_loaded < 2.0 * p95_unloaded
+    assert dropped > 0 and len(lat_loaded) + dropped == paired
+    assert len(lat_recovery) == len(recovery) and dropped_recovery == 0

@@ -14,8 +14,8 @@ mcap) whenever :meth:`BagWriter.flush` is called or ``flush_interval_s`` has pas
 every closed segment ``metadata.yaml`` is rewritten atomically (temporary file + rename) to list
 all closed segments. A kill therefore loses only the messages written since the last flush, and
 callers that must lose nothing (``process``) flush after every result. On a normal close the
-segments are merged into one file (again atomically: the merged bag is built beside the output
-and swapped in), so a finished bag is one ``.mcap`` plus ``metadata.yaml``.
+segments are merged into one file (``metadata.yaml`` always lists only files that exist, see
+:meth:`BagWriter._merge`), so a finished bag is one ``.mcap`` plus ``metadata.yaml``.
 
 rosbags 0.11 writes mcap (``StoragePlugin.MCAP``), which is what this module uses by default.
 """
@@ -496,13 +496,18 @@ class BagWriter:
             shutil.rmtree(seg_dir, ignore_errors=True)
 
     def _merge(self) -> None:
-        merged = self.path.with_name(self.path.name + ".merging")
-        old = self.path.with_name(self.path.name + ".segments")
-        for p in (merged, old):
-            if p.exists():
-                shutil.rmtree(p)
+        """Merge the segments into ``<name>_0.mcap``; the bag stays readable at every instant.
+
+        The merged file is built in a scratch folder inside the bag, then ``metadata.yaml`` is
+        switched to it atomically, the segments are deleted, the merged file gets its final name
+        by a hard link, ``metadata.yaml`` is switched again, and the scratch name is removed.
+        A kill at any point leaves a bag listing only files that exist.
+        """
+        scratch = self.path / ".merging"
+        if scratch.exists():
+            shutil.rmtree(scratch)
         with BagReader(self.path) as reader:
-            writer = Writer(merged, version=9, storage_plugin=StoragePlugin.MCAP)
+            writer = Writer(scratch, version=9, storage_plugin=StoragePlugin.MCAP)
             if self.compress:
                 writer.set_compression(CompressionMode.STORAGE, CompressionFormat.ZSTD)
             writer.open()
@@ -523,22 +528,33 @@ class BagWriter:
             for msg in reader.messages():
                 writer.write(conns[msg.topic], msg.log_time_ns, msg.data)
             writer.close()
-        # rename the storage file to <bag name>_0.mcap, then swap directories
-        meta_path = merged / "metadata.yaml"
-        meta = _yaml().load(meta_path.read_text())
+        meta = _yaml().load((scratch / "metadata.yaml").read_text())
         info = meta["rosbag2_bagfile_information"]
-        name = f"{self.path.name}_0.mcap"
-        os.replace(merged / info["relative_file_paths"][0], merged / name)
-        info["relative_file_paths"] = [name]
-        info["files"][0]["path"] = name
-        from io import StringIO
+        final = f"{self.path.name}_0.mcap"
+        temp = f"{self.path.name}_merged.mcap"
+        src = scratch / info["relative_file_paths"][0]
+        with open(src, "rb") as fh:
+            os.fsync(fh.fileno())
+        os.replace(src, self.path / temp)
+        shutil.rmtree(scratch, ignore_errors=True)
 
-        buf = StringIO()
-        _yaml().dump(meta, buf)
-        _write_atomic(meta_path, buf.getvalue())
-        os.replace(self.path, old)
-        os.replace(merged, self.path)
-        shutil.rmtree(old, ignore_errors=True)
+        def point_to(name: str) -> None:
+            info["relative_file_paths"] = [name]
+            info["files"][0]["path"] = name
+            from io import StringIO
+
+            buf = StringIO()
+            _yaml().dump(meta, buf)
+            _write_atomic(self.path / "metadata.yaml", buf.getvalue())
+            _fsync_dir(self.path)
+
+        point_to(temp)  # readable: the merged file only
+        for seg in self._segments:
+            (self.path / seg["relative_file_paths"][0]).unlink(missing_ok=True)
+        os.link(self.path / temp, self.path / final)
+        point_to(final)
+        (self.path / temp).unlink()
+        _fsync_dir(self.path)
 
     def __enter__(self) -> BagWriter:
         return self

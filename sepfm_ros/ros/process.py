@@ -8,7 +8,9 @@ motion), runs the same :class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the s
 the node's outputs with the source stamps to OUT: ``/sepfm/fundamental``, ``/sepfm/matches``,
 ``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it).
 
-A progress bar runs on stderr; at the end a summary (per-frame table with ``--table``) is printed,
+A progress bar runs on stderr (``--print-done`` also prints a line ``done K/N STAMP`` on stdout for
+each pair once its results are safely in OUT, for programs that watch the progress); at the end a
+summary (per-frame table with ``--table``) is printed,
 scored against the ground truth when the bag has it. Every result is flushed to OUT as soon as it
 is computed (see :class:`~sepfm_ros.ros.bag_io.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
@@ -23,7 +25,7 @@ import signal
 import sys
 import time
 from collections import deque
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -232,8 +234,12 @@ def run_process(
     mode: str | None = None,
     progress: bool = True,
     namespace: str = OUTPUT_NAMESPACE,
+    on_done: Callable[[int, int, int], None] | None = None,
 ) -> tuple[int, int]:
     """Process ``bag`` into a new bag ``out``; returns (pairs processed, pairs expected).
+
+    ``on_done(k, total, stamp_ns)`` is called after pair k's results were flushed to ``out``
+    (they survive any interruption from then on).
 
     Raises BagError subclasses on bad input; KeyboardInterrupt propagates after ``out`` is closed
     (readable, holding every result so far).
@@ -277,6 +283,8 @@ def run_process(
                     writer.flush()  # every result survives a kill from now on
                     done += 1
                     bar.update(1)
+                    if on_done is not None:
+                        on_done(done, total, stamp_ns(job.header.stamp))
             finally:
                 bar.close()
     return done, total
@@ -350,7 +358,17 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     )
     p.add_argument("--table", action="store_true", help="print the per-frame table")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument(
+        "--print-done",
+        action="store_true",
+        help="print 'done K/N SEC.NANOSEC' on stdout when a pair's results are safely written",
+    )
     return p.parse_args(argv)
+
+
+def print_done(k: int, total: int, stamp: int) -> None:
+    """``--print-done``: one flushed line per pair whose results are in the output bag."""
+    print(f"done {k}/{total} {stamp // 1_000_000_000}.{stamp % 1_000_000_000:09d}", flush=True)
 
 
 def main(argv: list[str]) -> int:
@@ -359,7 +377,14 @@ def main(argv: list[str]) -> int:
     interrupted = False
     try:
         params = parse_params(args.param)
-        done, total = run_process(args.bag, args.output, params, args.mode, not args.quiet)
+        done, total = run_process(
+            args.bag,
+            args.output,
+            params,
+            args.mode,
+            not args.quiet,
+            on_done=print_done if args.print_done else None,
+        )
     except BagError as err:
         print(f"sepfm_ros process: error: {err}", file=sys.stderr)
         return 1

@@ -8,8 +8,11 @@ FROM:=TO`` renames them, ``--start-offset S`` skips the first S seconds, ``--loo
 ``use_sim_time:=true`` follow it. ``--wait-for TOPIC`` waits until TOPIC has a subscriber before
 starting (useful when a node is still starting up). A progress line runs on stderr.
 
-Bad input (missing bag, corrupt or truncated storage, unknown topic or message type, header
-stamps that repeat or go backwards) gives a message and exit code 1, before anything is published.
+Bad input (missing bag, corrupt or truncated storage, unknown topic or message type) gives a
+message and exit code 1, before anything is published. Header stamps that repeat, go backwards or
+leave gaps (an interval over ``GAP_FACTOR`` times the topic's median) are played as recorded, the
+way a real camera would deliver them, after a warning with the counts per topic; ``--strict``
+refuses such bags instead (exit code 1).
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,6 +42,41 @@ from sepfm_ros.ros.bag_io import (
     has_header,
     header_stamp_ns,
 )
+
+GAP_FACTOR = 3.0
+
+
+@dataclass
+class StampReport:
+    """Header-stamp irregularities of one topic: counts of repeats, steps back and gaps."""
+
+    messages: int = 0
+    repeated: int = 0
+    backwards: int = 0
+    gaps: int = 0
+    largest_gap_s: float = 0.0
+
+    @property
+    def irregular(self) -> bool:
+        return bool(self.repeated or self.backwards or self.gaps)
+
+
+def stamp_irregularities(stamps: Sequence[int], gap_factor: float = GAP_FACTOR) -> StampReport:
+    """Count repeated, backwards and gap intervals in a topic's header stamps (ns, bag order).
+
+    A gap is a forward step longer than ``gap_factor`` times the median forward step.
+    """
+    report = StampReport(messages=len(stamps))
+    steps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+    report.repeated = sum(1 for d in steps if d == 0)
+    report.backwards = sum(1 for d in steps if d < 0)
+    forward = sorted(d for d in steps if d > 0)
+    if forward:
+        median = forward[len(forward) // 2]
+        big = [d for d in forward if d > gap_factor * median]
+        report.gaps = len(big)
+        report.largest_gap_s = max(big, default=0) / 1e9
+    return report
 
 
 def message_class(msgtype: str) -> Any:
@@ -101,6 +140,8 @@ class Replayer:
         start_offset_s: skip this many seconds from the bag's start.
         loop: play again from the start after the end (until :meth:`stop`).
         clock: publish /clock with the bag's time at ``clock_hz``.
+        strict: refuse (StampOrderError) a bag whose header stamps repeat or go backwards;
+            otherwise they are counted in :attr:`stamp_reports` and played as recorded.
     """
 
     def __init__(
@@ -114,6 +155,7 @@ class Replayer:
         loop: bool = False,
         clock: bool = False,
         clock_hz: float = 100.0,
+        strict: bool = False,
     ) -> None:
         if not rate > 0:
             raise BagError(f"--rate must be > 0, got {rate}")
@@ -130,7 +172,8 @@ class Replayer:
             self.reader.require(t)
         self.topics = wanted
         self.reader.check_known_types(wanted)
-        self._check_stamps()
+        self.stamp_reports: dict[str, StampReport] = {}
+        self._check_stamps(strict)
         self.start_ns = self.reader.start_time_ns + int(round(start_offset_s * 1e9))
         self.publishers = {}
         for t in wanted:
@@ -151,11 +194,28 @@ class Replayer:
                 Clock, "/clock", QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
             )
 
-    def _check_stamps(self) -> None:
-        checker = StampChecker()
+    def _check_stamps(self, strict: bool) -> None:
         with_header = [t for t in self.topics if has_header(self.reader.topics[t].msgtype)]
-        for i, msg in enumerate(self.reader.messages(with_header)):
-            checker.check(msg.topic, header_stamp_ns(msg.data), i)
+        if strict:
+            checker = StampChecker()
+            for i, msg in enumerate(self.reader.messages(with_header)):
+                checker.check(msg.topic, header_stamp_ns(msg.data), i)
+        stamps: dict[str, list[int]] = {t: [] for t in with_header}
+        for msg in self.reader.messages(with_header):
+            stamps[msg.topic].append(header_stamp_ns(msg.data))
+        self.stamp_reports = {t: stamp_irregularities(s) for t, s in stamps.items()}
+
+    def stamp_warnings(self) -> list[str]:
+        """One line per topic with irregular header stamps (empty when all are regular)."""
+        lines = []
+        for topic, r in sorted(self.stamp_reports.items()):
+            if r.irregular:
+                lines.append(
+                    f"warning: {topic}: {r.repeated} repeated, {r.backwards} backwards and "
+                    f"{r.gaps} gap(s) (largest {r.largest_gap_s:.2f} s) in {r.messages} header "
+                    "stamps; played as recorded"
+                )
+        return lines
 
     def wait_for_subscribers(self, topics: Sequence[str], timeout_s: float) -> None:
         """Wait until every (published, i.e. remapped) topic in ``topics`` has a subscriber."""
@@ -263,21 +323,28 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     )
     p.add_argument("--wait-timeout", type=float, default=30.0, help="seconds (default 30)")
     p.add_argument("--quiet", action="store_true", help="no progress line")
+    p.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse a bag whose header stamps repeat or go backwards (default: warn and play)",
+    )
     return p.parse_args(argv)
 
 
 def main(argv: list[str]) -> int:
     import rclpy
-    from rclpy.utilities import remove_ros_args
-
-    args = _parse(remove_ros_args(["replay", *argv])[1:])
+    # Own arguments come before --ros-args: rcl's remove_ros_args would also take our
+    # "--remap FROM:=TO" values for (deprecated-syntax) ROS remap rules.
+    split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
+    args = _parse(argv[:split])
+    ros_argv = argv[split:]
     try:
         remap = parse_remaps(args.remap)
         BagReader(args.bag).close()  # fail fast on a bad bag, before DDS starts
     except BagError as err:
         print(f"sepfm_ros replay: error: {err}", file=sys.stderr)
         return 1
-    rclpy.init(args=["replay", *argv])
+    rclpy.init(args=["replay", *ros_argv])
     previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
     node = rclpy.create_node("sepfm_replay")
     replayer = None
@@ -292,7 +359,10 @@ def main(argv: list[str]) -> int:
             args.loop,
             args.clock,
             args.clock_hz,
+            strict=args.strict,
         )
+        for line in replayer.stamp_warnings():
+            print(f"sepfm_ros replay: {line}", file=sys.stderr, flush=True)
         if args.wait_for:
             replayer.wait_for_subscribers(args.wait_for, args.wait_timeout)
         n = replayer.run(progress=not args.quiet)

@@ -6,14 +6,20 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sepfm_ros.geometry.epipolar import apply_transform, normalization_transform
+from sepfm_ros.geometry.epipolar import (
+    apply_transform,
+    homogeneous,
+    normalization_transform,
+    symmetric_epipolar_distance_h,
+)
 from sepfm_ros.geometry.solvers.design import epipolar_rows
 
 
 @dataclass
 class Correspondences:
     """pts1, pts2: (N, 2) pixels. x1, x2: (N, 2) normalised by T1, T2 (3, 3).
-    rows: (N, 9) rows of x2^T F_n x1 = 0 in the normalised coordinates."""
+    rows: (N, 9) rows of x2^T F_n x1 = 0 in the normalised coordinates.
+    X1, X2: (3, N) homogeneous pixel coordinates (for scoring)."""
 
     pts1: np.ndarray
     pts2: np.ndarray
@@ -22,13 +28,23 @@ class Correspondences:
     T1: np.ndarray
     T2: np.ndarray
     rows: np.ndarray
+    X1: np.ndarray
+    X2: np.ndarray
 
     @classmethod
     def from_pixels(cls, pts1: np.ndarray, pts2: np.ndarray) -> Correspondences:
         T1 = normalization_transform(pts1)
         T2 = normalization_transform(pts2)
         x1, x2 = apply_transform(T1, pts1), apply_transform(T2, pts2)
-        return cls(pts1, pts2, x1, x2, T1, T2, epipolar_rows(x1, x2))
+        X1 = np.ascontiguousarray(homogeneous(pts1).T)
+        X2 = np.ascontiguousarray(homogeneous(pts2).T)
+        return cls(pts1, pts2, x1, x2, T1, T2, epipolar_rows(x1, x2), X1, X2)
+
+    def distances(self, F: np.ndarray) -> np.ndarray:
+        """Symmetric epipolar distances (px) of (3, 3) -> (N,) or (M, 3, 3) -> (M, N) models."""
+        if F.ndim == 2:
+            return symmetric_epipolar_distance_h(F[None], self.X1, self.X2)[0]
+        return symmetric_epipolar_distance_h(F, self.X1, self.X2)
 
     def __len__(self) -> int:
         return int(self.pts1.shape[0])

@@ -34,19 +34,44 @@ def enforce_rank2(F: np.ndarray) -> np.ndarray:
     return (U * s[..., None, :]) @ Vt
 
 
-def _epipolar_terms(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray):
+def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
     """Per-model algebraic residuals and the first two coordinates of the epipolar lines.
 
-    F: (3, 3) or (M, 3, 3); pts: (N, 2). Returns (r, a2, b2, a1, b1), each (M, N): r = x2^T F x1,
-    (a2, b2) of l2 = F x1 (lines in image 2), (a1, b1) of l1 = F^T x2 (lines in image 1).
+    F: (M, 3, 3); X1, X2: (3, N) homogeneous points. Returns (r, l2, l1): r (M, N) =
+    x2^T F x1, l2 (M, 3, N) = F x1 (lines in image 2), l1 (M, 2, N) = first two rows of F^T x2.
+    Each product is one matrix multiplication over all models (not a batch of tiny ones).
     """
-    Fs = F[None] if F.ndim == 2 else F
-    x1 = homogeneous(pts1).T  # (3, N)
-    x2 = homogeneous(pts2).T
-    l2 = Fs @ x1  # (M, 3, N), batched BLAS
-    l1 = np.swapaxes(Fs, 1, 2)[:, :2] @ x2  # only the first two rows are needed
-    r = (l2 * x2).sum(axis=1)
-    return r, l2[:, 0], l2[:, 1], l1[:, 0], l1[:, 1]
+    M, N = F.shape[0], X1.shape[1]
+    l2 = (F.reshape(-1, 3) @ X1).reshape(M, 3, N)
+    l1 = (np.ascontiguousarray(F.transpose(0, 2, 1)[:, :2]).reshape(-1, 3) @ X2).reshape(M, 2, N)
+    r = l2[:, 0] * X2[0]
+    r += l2[:, 1] * X2[1]
+    r += l2[:, 2]
+    return r, l2, l1
+
+
+def symmetric_epipolar_distance_h(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
+    """:func:`symmetric_epipolar_distance` of (M, 3, 3) models on homogeneous (3, N) points.
+
+    The hot path of RANSAC scoring: the homogeneous points are prepared once per estimate.
+    Returns (M, N) px, inf where an epipolar line is undefined.
+    """
+    r, l2, l1 = _epipolar_terms(F, X1, X2)
+    n2 = l2[:, 0] ** 2
+    n2 += l2[:, 1] ** 2
+    n1 = l1[:, 0] ** 2
+    n1 += l1[:, 1] ** 2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.sqrt(n2, out=n2)
+        np.sqrt(n1, out=n1)
+        np.reciprocal(n2, out=n2)
+        np.reciprocal(n1, out=n1)
+        n2 += n1
+        np.abs(r, out=r)
+        r *= n2
+    r *= 0.5
+    r[~np.isfinite(r)] = np.inf
+    return r
 
 
 def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -60,11 +85,11 @@ def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarra
     Returns:
         (N,) for a single F, (M, N) for a batch; inf where an epipolar line is undefined.
     """
-    r, a2, b2, a1, b1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        d = 0.5 * np.abs(r) * (1.0 / np.sqrt(a2 * a2 + b2 * b2) + 1.0 / np.sqrt(a1 * a1 + b1 * b1))
-    d = np.where(np.isfinite(d), d, np.inf)
-    return d[0] if np.asarray(F).ndim == 2 else d
+    F = np.asarray(F, dtype=np.float64)
+    d = symmetric_epipolar_distance_h(
+        F[None] if F.ndim == 2 else F, homogeneous(pts1).T, homogeneous(pts2).T
+    )
+    return d[0] if F.ndim == 2 else d
 
 
 def sampson_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -74,8 +99,10 @@ def sampson_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.nd
 
     Shapes as :func:`symmetric_epipolar_distance`.
     """
-    r, a2, b2, a1, b1 = _epipolar_terms(np.asarray(F, dtype=np.float64), pts1, pts2)
-    den = a2 * a2 + b2 * b2 + a1 * a1 + b1 * b1
+    F = np.asarray(F, dtype=np.float64)
+    Fs = F[None] if F.ndim == 2 else F
+    r, l2, l1 = _epipolar_terms(Fs, homogeneous(pts1).T, homogeneous(pts2).T)
+    den = l2[:, 0] ** 2 + l2[:, 1] ** 2 + l1[:, 0] ** 2 + l1[:, 1] ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.abs(r) / np.sqrt(den)
     d = np.where(np.isfinite(d), d, np.inf)

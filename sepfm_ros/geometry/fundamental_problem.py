@@ -13,7 +13,6 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     apply_transform,
     denormalize,
-    symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers import eight_point, seven_point
@@ -95,7 +94,7 @@ class FundamentalProblem:
 
     def distances(self, F: np.ndarray) -> np.ndarray:
         """(K, 3, 3) -> (K, N) symmetric epipolar distances in px."""
-        return symmetric_epipolar_distance(F, self.data.pts1, self.data.pts2)
+        return self.data.distances(F)
 
     def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return score_distances(self.distances(models), self.threshold, self.scoring)

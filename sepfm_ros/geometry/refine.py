@@ -14,7 +14,6 @@ from sepfm_ros.geometry.epipolar import (
     denormalize,
     enforce_rank2,
     normalize_fundamental,
-    symmetric_epipolar_distance,
 )
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
@@ -81,7 +80,7 @@ def iterative_refit(
         the best by its own scoring); empty when no step had 8 inliers.
     """
     t2 = threshold * threshold
-    d = symmetric_epipolar_distance(F, data.pts1, data.pts2)
+    d = data.distances(F)
     best_cost = float(np.minimum(d * d, t2).sum())
     fitted: list[np.ndarray] = []
     previous = None
@@ -95,7 +94,7 @@ def iterative_refit(
             continue
         previous = inl
         G = refit(data, inl, irls_iterations)
-        dG = symmetric_epipolar_distance(G, data.pts1, data.pts2)
+        dG = data.distances(G)
         c = float(np.minimum(dG * dG, t2).sum())
         fitted.append(G)
         if c < best_cost:  # continue from the better model

@@ -8,10 +8,11 @@ Matas, CVPR 2005) repairs this by estimating the plane's homography H and then F
 H and just two off-plane correspondences (plane and parallax), which needs few samples.
 
 :func:`plane_and_parallax` does this after the estimator: if a homography explains at least
-``plane_share`` of F's inliers, F = [e']_x H is hypothesised from random pairs of matches off the
-plane, each candidate (and a least-squares refit of the best) is scored with the same truncated
-quadratic (MSAC) cost as the estimator, and the best of the original F and the candidates is
-returned. The original F is kept unless a candidate has a strictly lower cost.
+``plane_share`` of F's inliers and F's support off the plane is not clearly above chance (see
+below; checked first, as it is cheap), F = [e']_x H is hypothesised from random pairs of matches
+off the plane, each candidate (and a least-squares refit of the best) is scored with the same
+truncated quadratic (MSAC) cost as the estimator, and the best of the original F and the
+candidates is returned. The original F is kept unless a candidate has a strictly lower cost.
 
 A lower cost is not always enough: with many outliers, an F fitted to the plane can collect more
 chance agreements from outliers than the true F gains from a few off-plane points, and then the
@@ -137,6 +138,13 @@ def plane_and_parallax(
     off = np.flatnonzero(~on)
     if len(off) < 2:
         out.reason = f"degenerate: dominant plane (all {len(pts1)} matches on one homography)"
+        return out
+    # cheap test first: an F whose support off the plane is well above chance is determined by
+    # the data; only an F without it is challenged by plane-and-parallax candidates
+    out.off_plane_chance = chance_inliers(F, pts1[off], pts2[off], threshold, rng, shuffles)
+    if out.off_plane_inliers - out.off_plane_chance >= max(
+        min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)
+    ):
         return out
     n_pairs = len(off) * (len(off) - 1) // 2
     if n_pairs <= max_candidates:

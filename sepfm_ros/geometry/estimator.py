@@ -17,7 +17,6 @@ from __future__ import annotations
 import time
 from typing import Any
 
-import cv2
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
@@ -59,7 +58,6 @@ _DEFAULTS: dict[str, Any] = {
     "line_threshold": 0.5,  # T1: H_e inlier threshold, working px
     "min_line_inliers": 4,
     "triple": "raw",  # "raw" sample points or "synthesized" from the refined H_e
-    "plane_ratio": 0.95,  # inlier share on one homography flagged as a dominant plane
     "plane_check": True,  # DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py)
 }
 
@@ -116,44 +114,6 @@ def _degeneracy(p1: np.ndarray, p2: np.ndarray, threshold: float) -> str | None:
     return None
 
 
-def _dominant_plane(p1: np.ndarray, p2: np.ndarray, threshold: float, ratio: float) -> str | None:
-    """Flag an F whose inliers are (nearly) all explained by one homography.
-
-    With too few inliers off the plane, the epipolar geometry is not determined by the data
-    (a planar scene has a 3-parameter family of F), so F is reported as unreliable.
-
-    Args:
-        p1, p2: (K, 2) the inliers of F. ratio: share of inliers on the homography (within
-            2 x threshold px of transfer error) from which F is flagged; at least 10 inliers
-            must lie off the plane for F to pass.
-    """
-    if len(p1) < 8:
-        return None
-    tol = 2.0 * threshold
-    H, _ = cv2.findHomography(p1, p2, 0)  # least squares: a cheap first look
-    if H is not None and _on_homography(H, p1, p2, tol).mean() < 0.5:
-        return None  # far from planar: skip the robust fit
-    H, _ = cv2.findHomography(p1, p2, cv2.RANSAC, tol, maxIters=200, confidence=0.99)
-    if H is None:
-        return None
-    on = _on_homography(H, p1, p2, tol)
-    off = int(np.count_nonzero(~on))
-    if on.mean() >= ratio or off < 10:
-        return (
-            f"degenerate: dominant plane ({100 * on.mean():.0f}% of inliers fit one "
-            f"homography, {off} off it)"
-        )
-    return None
-
-
-def _on_homography(H: np.ndarray, p1: np.ndarray, p2: np.ndarray, tol: float) -> np.ndarray:
-    """(K,) bool: transfer error ||H p1 - p2|| below ``tol`` px."""
-    q = np.c_[p1, np.ones(len(p1))] @ H.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.linalg.norm(q[:, :2] / q[:, 2:] - p2, axis=1)
-    return np.nan_to_num(err, nan=np.inf) < tol
-
-
 def _triples(fit: LineHomographyFit, p1: np.ndarray, p2: np.ndarray, kind: str):
     """The fixed line correspondences of stage 2.
 
@@ -193,7 +153,7 @@ def estimate_fundamental(
         seed: seed of the ``numpy.random.Generator`` behind every random choice.
         **options: see ``_DEFAULTS`` in this module (max_samples, refine, hough_width,
             hough_min_votes, line_distance, hough_points, max_line_pairs, line_threshold,
-            min_line_inliers, triple, plane_ratio, plane_check).
+            min_line_inliers, triple, plane_check).
     Raises:
         ValueError: unknown method or option, malformed points or sizes, too few points.
     """
@@ -325,12 +285,6 @@ def estimate_fundamental(
         est.status = f"degenerate: only {k} inliers"
     elif plane is not None:
         est.status = plane
-    else:
-        plane = _dominant_plane(
-            p1[est.inliers], p2[est.inliers], threshold, float(opt["plane_ratio"])
-        )
-        if plane is not None:
-            est.status = plane
     est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
     return est
 

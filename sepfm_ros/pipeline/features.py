@@ -65,8 +65,65 @@ def to_gray(image: np.ndarray) -> np.ndarray:
 def detect(image: np.ndarray, detector: cv2.Feature2D) -> tuple[np.ndarray, np.ndarray | None]:
     """Detect keypoints and descriptors: returns ((K, 2) float64 points, (K, D) descriptors)."""
     kps, desc = detector.detectAndCompute(to_gray(image), None)
-    pts = np.array([kp.pt for kp in kps], dtype=np.float64).reshape(-1, 2)
+    pts = cv2.KeyPoint_convert(kps).astype(np.float64).reshape(-1, 2) if kps else np.zeros((0, 2))
     return pts, desc
+
+
+# Rows of image-a descriptors per block of the binary distance product (bounds its memory to
+# about this many x len(desc_b) float32 values).
+_BLOCK_ELEMENTS = 4_000_000
+
+
+def _two_nearest_binary(
+    desc_a: np.ndarray, desc_b: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Two nearest b-descriptors of every a-descriptor under the Hamming distance.
+
+    Bits are mapped to +-1 so that one float32 product gives ``bits - 2 * hamming`` exactly
+    (integers far below 2^24). Ties go to the lower index, as in OpenCV's brute-force matcher.
+
+    Args:
+        desc_a: (Na, B) uint8 packed binary descriptors; desc_b: (Nb, B), Nb >= 2.
+    Returns:
+        (i1, d1, i2, d2): (Na,) indices into desc_b and Hamming distances (float64) of the
+        nearest and second-nearest descriptor.
+    """
+    bits = 8 * desc_a.shape[1]
+    sign_b = 1.0 - 2.0 * np.unpackbits(desc_b, axis=1).astype(np.float32)
+    n_a = len(desc_a)
+    i1 = np.empty(n_a, dtype=np.int64)
+    i2 = np.empty(n_a, dtype=np.int64)
+    s1 = np.empty(n_a, dtype=np.float32)
+    s2 = np.empty(n_a, dtype=np.float32)
+    step = max(1, _BLOCK_ELEMENTS // max(1, len(desc_b)))
+    for start in range(0, n_a, step):
+        stop = min(n_a, start + step)
+        sign_a = 1.0 - 2.0 * np.unpackbits(desc_a[start:stop], axis=1).astype(np.float32)
+        # similarity = bits - 2 * hamming; cv2.gemm keeps the work off numpy's BLAS thread pool
+        sim = cv2.gemm(sign_a, sign_b, 1.0, None, 0.0, flags=cv2.GEMM_2_T)
+        rows = np.arange(stop - start)
+        best = sim.argmax(axis=1)  # first (lowest) index among ties
+        s1[start:stop] = sim[rows, best]
+        sim[rows, best] = -np.inf
+        second = sim.argmax(axis=1)
+        s2[start:stop] = sim[rows, second]
+        i1[start:stop], i2[start:stop] = best, second
+    return i1, (bits - s1.astype(np.float64)) / 2.0, i2, (bits - s2.astype(np.float64)) / 2.0
+
+
+def _two_nearest(
+    desc_a: np.ndarray, desc_b: np.ndarray, features: str
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(i1, d1, i2, d2) of :func:`_two_nearest_binary` for any descriptor type.
+
+    Binary descriptors (uint8, Hamming) take the exact product above; float descriptors (SIFT,
+    L2) take OpenCV's brute-force k-nearest search (the same as ``BFMatcher.knnMatch``).
+    """
+    if _norm_for(features) == cv2.NORM_HAMMING and desc_a.dtype == np.uint8:
+        return _two_nearest_binary(desc_a, desc_b)
+    dist, idx = cv2.batchDistance(desc_a, desc_b, cv2.CV_32F, normType=_norm_for(features), K=2)
+    dist = dist.astype(np.float64)
+    return idx[:, 0].astype(np.int64), dist[:, 0], idx[:, 1].astype(np.int64), dist[:, 1]
 
 
 def match_descriptors(
@@ -81,21 +138,16 @@ def match_descriptors(
     empty = Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0))
     if desc_a is None or desc_b is None or len(desc_a) < 2 or len(desc_b) < 2:
         return empty
-    matcher = cv2.BFMatcher(_norm_for(features))
-    knn = matcher.knnMatch(desc_a, desc_b, k=2)
-    ia, ib, rr = [], [], []
-    for pair in knn:
-        if len(pair) < 2:
-            continue
-        m, n = pair
-        r = m.distance / n.distance if n.distance > 0 else (0.0 if m.distance == 0 else 1.0)
-        if r < ratio:
-            ia.append(m.queryIdx)
-            ib.append(m.trainIdx)
-            rr.append(r)
-    if not ia:
+    i1, d1, i2, d2 = _two_nearest(
+        np.ascontiguousarray(desc_a), np.ascontiguousarray(desc_b), features
+    )
+    del i2  # only the second distance matters for the ratio test
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r = np.where(d2 > 0, d1 / d2, np.where(d1 == 0, 0.0, 1.0))
+    ia = np.flatnonzero(r < ratio)
+    if not len(ia):
         return empty
-    ia, ib, rr = np.asarray(ia), np.asarray(ib), np.asarray(rr, dtype=np.float64)
+    ib, rr = i1[ia], r[ia]
     order = np.argsort(rr, kind="stable")
     ia, ib, rr = ia[order], ib[order], rr[order]
     # keep the best match per point in image b (one-to-one on b's side), then drop repeated

@@ -12,6 +12,10 @@ Callers that decode the images themselves (e.g. from ROS messages) pass the time
 features can be cached by a caller-chosen key (e.g. a frame's stamp), so in motion mode each
 frame is detected once.
 
+``process`` is ``estimate(match(...))``: :meth:`Pipeline.match` (features and matches, C code that
+releases the GIL) and :meth:`Pipeline.estimate` (the estimator, mostly Python) may run on two
+threads, one pair apart, as the live node does; the result of a pair does not change.
+
 Timing stages (milliseconds): ``decode`` (when given), ``features``, ``match``, ``estimate`` (the
 whole estimator call), the estimator's own stages when it reports them (``lines`` = line-pair
 search, ``stage1``, ``stage2``, ``refine``) and ``total``.
@@ -122,6 +126,26 @@ def unique_matches(matches: Matches) -> Matches:
 
 
 @dataclass
+class MatchedPair:
+    """The first half of a pipeline result (see :meth:`Pipeline.match`).
+
+    Attributes:
+        matches: putative matches without duplicates, best first.
+        size_a, size_b: (width, height) of the two images.
+        timings_ms: stages so far (prior stages, "features", "match").
+        config: the config the matches were made with (the estimate uses it too).
+        busy_ms: milliseconds spent so far (prior stages included), counted in "total".
+    """
+
+    matches: Matches
+    size_a: tuple[int, int]
+    size_b: tuple[int, int]
+    timings_ms: dict[str, float]
+    config: PipelineConfig
+    busy_ms: float
+
+
+@dataclass
 class PipelineResult:
     """What the pipeline made of one image pair.
 
@@ -198,29 +222,22 @@ class Pipeline:
                 self._cache.popitem(last=False)
         return feats
 
-    def process(
+    def match(
         self,
         image_a: np.ndarray,
         image_b: np.ndarray,
         key_a: Hashable | None = None,
         key_b: Hashable | None = None,
         prior_timings_ms: dict[str, float] | None = None,
-    ) -> PipelineResult:
-        """Match ``image_a`` to ``image_b`` and estimate F (``x_b^T F x_a = 0``).
+    ) -> MatchedPair:
+        """First half of :meth:`process`: features (cached by key) and matches of a pair.
 
-        Args:
-            image_a, image_b: (H, W) or (H, W, 3|4) numpy images (8-bit, or stretched to 8 bits).
-            key_a, key_b: optional hashable keys under which detected features are cached
-                (same key = same image); None disables caching for that image.
-            prior_timings_ms: stages the caller ran before (e.g. {"decode": 3.2}), reported
-                first in ``timings_ms`` and added to its "total".
-        Returns:
-            A :class:`PipelineResult`. Estimation failures (too few matches, degenerate data)
-            are reported in ``result.estimate.status`` with ``F`` None, never raised.
+        Runs on the thread that owns this pipeline (it uses the feature cache); the result
+        carries the config it was made with, so :meth:`estimate` may run on another thread.
         """
+        t_start = time.perf_counter()
         cfg = self._config
         timings: dict[str, float] = dict(prior_timings_ms or {})
-        t_start = time.perf_counter()
         size_a = (int(image_a.shape[1]), int(image_a.shape[0]))
         size_b = (int(image_b.shape[1]), int(image_b.shape[0]))
 
@@ -236,9 +253,20 @@ class Pipeline:
             k = cfg.max_matches
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])
         timings["match"] = _ms(t0)
+        busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy)
 
+    def estimate(self, matched: MatchedPair) -> PipelineResult:
+        """Second half of :meth:`process`: F from ``matched`` under ``matched.config``.
+
+        Uses no pipeline state, so it may run on another thread than :meth:`match` (e.g. the
+        live node estimates one pair while it matches the next).
+        """
+        t_start = time.perf_counter()
+        matches = matched.matches
+        timings = dict(matched.timings_ms)
         t0 = time.perf_counter()
-        estimate = self._estimate(matches, size_a, size_b)
+        estimate = _estimate(matches, matched.size_a, matched.size_b, matched.config)
         timings["estimate"] = _ms(t0)
         for stage in ESTIMATOR_STAGES:
             if stage in estimate.timings_ms:
@@ -254,37 +282,63 @@ class Pipeline:
         if len(estimate.line_inliers):
             idx = np.asarray(estimate.line_inliers, dtype=np.int64)
             on_line[idx[(idx >= 0) & (idx < n)]] = True
-        timings["total"] = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        return PipelineResult(matches, estimate, errors, on_line, size_a, size_b, timings)
+        timings["total"] = matched.busy_ms + _ms(t_start)
+        return PipelineResult(
+            matches, estimate, errors, on_line, matched.size_a, matched.size_b, timings
+        )
 
-    def _estimate(
-        self, matches: Matches, size_a: tuple[int, int], size_b: tuple[int, int]
-    ) -> Estimate:
-        cfg = self._config
-        n = len(matches)
-        if n < MIN_MATCHES:
-            return Estimate(
-                F=None,
-                inliers=np.zeros(n, dtype=bool),
-                status=f"too few matches: {n} < {MIN_MATCHES}",
-                method=cfg.method,
-            )
-        try:
-            return estimate_fundamental(
-                matches.pts_a,
-                matches.pts_b,
-                size_a,
-                size_b,
-                method=cfg.method,
-                threshold=cfg.threshold_px,
-                confidence=cfg.confidence,
-                seed=cfg.seed,
-                **cfg.estimator_options,
-            )
-        except ValueError as err:  # the estimator's "bad input" contract
-            return Estimate(
-                F=None,
-                inliers=np.zeros(n, dtype=bool),
-                status=f"estimator rejected input: {err}",
-                method=cfg.method,
-            )
+    def process(
+        self,
+        image_a: np.ndarray,
+        image_b: np.ndarray,
+        key_a: Hashable | None = None,
+        key_b: Hashable | None = None,
+        prior_timings_ms: dict[str, float] | None = None,
+    ) -> PipelineResult:
+        """Match ``image_a`` to ``image_b`` and estimate F (``x_b^T F x_a = 0``).
+
+        The same as ``estimate(match(...))``.
+
+        Args:
+            image_a, image_b: (H, W) or (H, W, 3|4) numpy images (8-bit, or stretched to 8 bits).
+            key_a, key_b: optional hashable keys under which detected features are cached
+                (same key = same image); None disables caching for that image.
+            prior_timings_ms: stages the caller ran before (e.g. {"decode": 3.2}), reported
+                first in ``timings_ms`` and added to its "total".
+        Returns:
+            A :class:`PipelineResult`. Estimation failures (too few matches, degenerate data)
+            are reported in ``result.estimate.status`` with ``F`` None, never raised.
+        """
+        return self.estimate(self.match(image_a, image_b, key_a, key_b, prior_timings_ms))
+
+
+def _estimate(
+    matches: Matches, size_a: tuple[int, int], size_b: tuple[int, int], cfg: PipelineConfig
+) -> Estimate:
+    n = len(matches)
+    if n < MIN_MATCHES:
+        return Estimate(
+            F=None,
+            inliers=np.zeros(n, dtype=bool),
+            status=f"too few matches: {n} < {MIN_MATCHES}",
+            method=cfg.method,
+        )
+    try:
+        return estimate_fundamental(
+            matches.pts_a,
+            matches.pts_b,
+            size_a,
+            size_b,
+            method=cfg.method,
+            threshold=cfg.threshold_px,
+            confidence=cfg.confidence,
+            seed=cfg.seed,
+            **cfg.estimator_options,
+        )
+    except ValueError as err:  # the estimator's "bad input" contract
+        return Estimate(
+            F=None,
+            inliers=np.zeros(n, dtype=bool),
+            status=f"estimator rejected input: {err}",
+            method=cfg.method,
+        )

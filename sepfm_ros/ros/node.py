@@ -4,12 +4,23 @@ Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair stereo stamps (:mod:`sepfm_ros.ros.sync`) and put the newest pair into a one-element
-slot. One dedicated worker thread takes the pair from the slot, decodes the images, runs the
-:class:`~sepfm_ros.pipeline.pipeline.Pipeline` and publishes. A pair still waiting in the slot when
-a newer one arrives is replaced and counted as dropped, so nothing queues without bound and the
-executor keeps receiving while the worker computes (OpenCV releases the GIL). A dedicated thread
-is used rather than a MultiThreadedExecutor because the latest-only slot is needed anyway and
-running several estimations at once on 2 cores would only raise everyone's latency.
+input slot. A pair still waiting there when a newer one arrives is replaced and counted as
+dropped, so nothing queues without bound. Two worker threads then run the
+:class:`~sepfm_ros.pipeline.pipeline.Pipeline` one pair apart, like a two-stage assembly line:
+
+- ``sepfm-match`` takes the newest pair from the input slot, decodes the images, detects features
+  (each frame once: cached by stamp) and matches them (:meth:`Pipeline.match`, OpenCV code that
+  releases the GIL), and hands the matches over in a one-element slot;
+- ``sepfm-estimate`` runs the estimator on them (:meth:`Pipeline.estimate`, mostly Python) and
+  publishes.
+
+The match thread starts a pair only when the hand-over slot is empty, so it runs at most one pair
+ahead of the estimator and matches the newest pair just before the estimator can take it: on two
+cores the features of pair n+1 are computed while pair n is estimated, and no pair is matched and
+then thrown away. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
+config it was matched with, so the results equal offline processing. Threads of our own are used
+rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
+several estimations at once on 2 cores would only raise everyone's latency.
 """
 
 from __future__ import annotations
@@ -45,7 +56,7 @@ from std_msgs.msg import Header
 from sepfm_ros.geometry import METHODS
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.features import FEATURES
-from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
     check_compressed,
@@ -213,6 +224,17 @@ class Job:
     key_b: Any
 
 
+@dataclass
+class MatchedJob:
+    """A matched pair waiting for the estimate thread."""
+
+    job: Job
+    matched: MatchedPair
+    images: tuple[np.ndarray, np.ndarray]  # decoded a, b (for ~/debug_image)
+    wait_ms: float  # receipt -> start of processing (decode)
+    matched_at: float  # time.monotonic() when matching ended
+
+
 def _load_malloc_trim():
     """glibc's malloc_trim (None elsewhere): hands freed heap pages back to the system."""
     try:
@@ -258,7 +280,8 @@ class SepfmNode(Node):
 
         self._lock = threading.Lock()
         self._cond = threading.Condition(self._lock)
-        self._slot: Job | None = None
+        self._slot: Job | None = None  # newest pair, waiting for the match thread
+        self._matched: MatchedJob | None = None  # matched pair, waiting for the estimate thread
         self._stop = False
         self._pending_config: PipelineConfig | None = None
         self._pipeline = Pipeline(pipeline_config(values), cache_size=8)
@@ -328,8 +351,12 @@ class SepfmNode(Node):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
         self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
-        self._worker = threading.Thread(target=self._work, name="sepfm-worker", daemon=True)
-        self._worker.start()
+        self._workers = [
+            threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
+            threading.Thread(target=self._estimate_loop, name="sepfm-estimate", daemon=True),
+        ]
+        for worker in self._workers:
+            worker.start()
         self.get_logger().info(
             f"{self._mode} mode, {self._transport} transport, listening on "
             f"{', '.join(s.topic_name for s in self._subs)}; {self._pipeline.config}"
@@ -411,7 +438,7 @@ class SepfmNode(Node):
                 self._dropped += 1
             self._slot = job
             self._pairs += 1
-            self._cond.notify()
+            self._cond.notify_all()  # both worker threads wait on this condition
 
     def _on_stereo(self, msg: Any, side: int) -> None:
         received = time.monotonic()
@@ -461,10 +488,11 @@ class SepfmNode(Node):
         self._offer(Job(first[0], msg, received, copy_header(msg.header), first[2], stamp))
 
     # ---------------------------------------------------------------- worker
-    def _work(self) -> None:
+    def _match_loop(self) -> None:
+        """Thread ``sepfm-match``: newest pair -> decoded images -> matches -> hand-over slot."""
         while True:
             with self._cond:
-                while self._slot is None and not self._stop:
+                while (self._slot is None or self._matched is not None) and not self._stop:
                     self._cond.wait()
                 if self._stop:
                     return
@@ -473,14 +501,37 @@ class SepfmNode(Node):
             if config is not None:
                 self._pipeline.configure(config)
             try:
-                self._process(job)
+                matched = self._match(job)
             except ImageDecodeError as err:
                 self._bad_input(err.kind, str(err))
                 self._publish_failure(job, err.kind, str(err))
+                continue
             except Exception as err:  # keep serving; count and log once per kind
-                kind = f"internal_{type(err).__name__}"
-                self._bad_input(kind, "".join(traceback.format_exception(err)))
-                self._publish_failure(job, kind, f"{type(err).__name__}: {err}")
+                self._internal_error(job, err)
+                continue
+            with self._cond:
+                self._matched = matched
+                self._cond.notify_all()
+
+    def _estimate_loop(self) -> None:
+        """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
+        while True:
+            with self._cond:
+                while self._matched is None and not self._stop:
+                    self._cond.wait()
+                if self._stop:
+                    return
+                matched, self._matched = self._matched, None
+                self._cond.notify_all()  # the match thread may take the next pair now
+            try:
+                self._estimate_and_publish(matched)
+            except Exception as err:  # keep serving; count and log once per kind
+                self._internal_error(matched.job, err)
+
+    def _internal_error(self, job: Job, err: Exception) -> None:
+        kind = f"internal_{type(err).__name__}"
+        self._bad_input(kind, "".join(traceback.format_exception(err)))
+        self._publish_failure(job, kind, f"{type(err).__name__}: {err}")
 
     def _publish_failure(self, job: Job, kind: str, reason: str) -> None:
         """Answer a pair that could not be processed on ~/estimate_info (ERROR level)."""
@@ -501,7 +552,7 @@ class SepfmNode(Node):
         except Exception as err:  # noqa: BLE001 - e.g. shutting down; never kill the worker
             self._bad_input(f"internal_{type(err).__name__}", f"cannot publish a failure: {err}")
 
-    def _process(self, job: Job) -> None:
+    def _match(self, job: Job) -> MatchedJob:
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
         t0 = time.perf_counter()
@@ -513,9 +564,18 @@ class SepfmNode(Node):
                 "size_mismatch",
                 f"images of a pair differ in size: {image_a.shape[::-1]} vs {image_b.shape[::-1]}",
             )
-        result = self._pipeline.process(
+        matched = self._pipeline.match(
             image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
         )
+        with self._lock:
+            self._wait_ms.append(wait_ms)
+            self._max_wait_ms = max(self._max_wait_ms, wait_ms)
+        return MatchedJob(job, matched, (image_a, image_b), wait_ms, time.monotonic())
+
+    def _estimate_and_publish(self, item: MatchedJob) -> None:
+        job = item.job
+        queue_ms = (time.monotonic() - item.matched_at) * 1e3
+        result = self._pipeline.estimate(item.matched)
         t0 = time.perf_counter()
         header = job.header
         with self._lock:
@@ -526,26 +586,25 @@ class SepfmNode(Node):
         self._pub_matches.publish(result_to_pointcloud2(result, header))
         publish_ms = (time.perf_counter() - t0) * 1e3
         latency_ms = (time.monotonic() - job.received) * 1e3
+        extra = {"publish": publish_ms, "wait": item.wait_ms, "queue": queue_ms}
         self._pub_info.publish(
             estimate_info(
                 result,
                 header,
                 job.msg_a.header.stamp,
                 job.msg_b.header.stamp,
-                self._pipeline.config.features,
-                extra_timings_ms={"publish": publish_ms, "wait": wait_ms, "latency": latency_ms},
+                item.matched.config.features,
+                extra_timings_ms={**extra, "latency": latency_ms},
                 node_name=self.get_fully_qualified_name(),
             )
         )
         if self._pub_debug.get_subscription_count() > 0:
             with self._lock:
                 n_lines = self._epipolar_lines
-            canvas = draw_result(image_a, image_b, result, n_lines)
+            canvas = draw_result(*item.images, result, n_lines)
             self._pub_debug.publish(numpy_to_image(canvas, "bgr8", header))
         with self._lock:
             self._latency_ms.append(latency_ms)
-            self._wait_ms.append(wait_ms)
-            self._max_wait_ms = max(self._max_wait_ms, wait_ms)
             if published:
                 self._published += 1
             if not result.ok:
@@ -632,11 +691,12 @@ class SepfmNode(Node):
         self._pub_diag.publish(diagnostic_array(header, [status]))
 
     def shutdown(self) -> None:
-        """Stop the worker thread (waits for the pair in progress)."""
+        """Stop the worker threads (waits for the pairs in progress)."""
         with self._cond:
             self._stop = True
             self._cond.notify_all()
-        self._worker.join(timeout=10.0)
+        for worker in self._workers:
+            worker.join(timeout=10.0)
 
 
 def _usage() -> str:

@@ -28,7 +28,7 @@ from sepfm_ros.ros.results import read_results  # noqa: E402
 from sepfm_ros.synthetic.sequences import motion_sequence  # noqa: E402
 
 SEED = 20261123
-KILL_TRIALS = 20
+KILL_TRIALS = int(os.environ.get("SEPFM_KILL_TRIALS", 20))
 STEREO_BAG = REPO / "bags" / "synthetic_stereo"
 PROCESS_ARGS = ["--quiet", "--print-done", "-p", "seed:=3"]
 

@@ -8,6 +8,7 @@ comes from a seeded generator.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 import time
@@ -53,8 +54,10 @@ from sepfm_ros.synthetic.sequences import stereo_sequence, street_scene  # noqa:
 
 SEED = 20261122
 SIZE = (320, 240)  # small frames keep the suite fast; the node's work per pair is the same kind
-FUZZ_RAW = 7000  # malformed sensor_msgs/Image messages
-FUZZ_COMPRESSED = 3000  # malformed sensor_msgs/CompressedImage messages
+# Sizes of the issue (10,000 malformed messages, 60 s overload); benchmarks/bench_robustness.py
+# can scale them through the environment.
+FUZZ_RAW = int(os.environ.get("SEPFM_FUZZ_RAW", 7000))  # malformed sensor_msgs/Image messages
+FUZZ_COMPRESSED = int(os.environ.get("SEPFM_FUZZ_COMPRESSED", 3000))  # ... CompressedImage
 VALID_EVERY = 100  # one valid pair after this many malformed messages
 FUZZ_RATE_HZ = 400.0  # malformed messages per second (a fast camera driver gone wrong)
 DEEP_SHARE = 0.05  # share of malformed messages only found when decoding (sent in a pair)
@@ -724,7 +727,7 @@ def test_dds_peer_started_and_killed_repeatedly_does_not_disturb_node(robust, fr
 
 
 # --------------------------------------------------------------------------- overload
-OVERLOAD_S = 60.0
+OVERLOAD_S = float(os.environ.get("SEPFM_OVERLOAD_S", 60.0))
 RECOVERY_S = 10.0
 
 

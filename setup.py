@@ -46,6 +46,9 @@ setup(
         "opencv-python-headless>=4.8",
         "rosbags>=0.10",
         "rosbags-image>=0.10",
+        # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
+        # core); python3-threadpoolctl in package.xml
+        "threadpoolctl>=3.1",
         # `eval` (sepfm_ros.evaluation): PNG plots of the report (CDFs, trial curves), and the
         # progress bar of long runs. Both install from binary wheels; packaged as
         # python3-matplotlib and python3-tqdm for ROS (package.xml), which has no optional

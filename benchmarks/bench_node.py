@@ -7,10 +7,14 @@ For each scene (templeRing 640x480: consecutive views as a left/right pair; KITT
 1241x376) it prints:
 
 - ``pipeline``: the Pipeline called directly on decoded images (no ROS), pairs/s and per-stage ms;
+- ``pipeline 2 threads``: the same, matching pair n+1 on a second thread while pair n is
+  estimated, as the node does (the most the node could reach without ROS);
 - ``node @R Hz``: the node subprocess fed pairs at R pairs/s over DDS for the given time:
   answered pairs/s, dropped pairs, latency receipt->publish p50/p95 (the node's own clock),
   end-to-end latency (stamp -> answer received here) p50/p95, worst wait before processing
-  (receipt -> start), and the per-stage split including decode and publish;
+  (receipt -> start), the node process's CPU time per answered pair (robust to other load on
+  the machine), and the per-stage split including decode, queue (matched pair waiting for the
+  estimate thread) and publish;
 - ``node closed loop``: the next pair is sent as soon as the previous answer arrived (the most
   the node sustains without dropping).
 
@@ -47,7 +51,7 @@ SCENES = {
     ],
 }
 STAGES = ("decode", "features", "match", "lines", "stage1", "stage2", "refine", "estimate")
-STAGES += ("publish", "total")
+STAGES += ("queue", "publish", "total")
 
 
 def pct(values, q):
@@ -60,12 +64,23 @@ def stage_line(per_stage: dict[str, list[float]]) -> str:
     )  # fmt: skip
 
 
+def cpu_seconds(pid: int | None = None) -> float:
+    """User + system CPU seconds of process ``pid`` (all its threads; None = this process)."""
+    if pid is None:
+        return time.process_time()
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def bench_pipeline(pairs, args) -> None:
     from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+    from sepfm_ros.ros.node import limit_thread_pools
 
+    limit_thread_pools(1)  # as in the node
     pipeline = Pipeline(
         PipelineConfig(features=args.features, max_features=args.max_features, method=args.method)
     )
+    cpu0 = cpu_seconds()
     per_stage: dict[str, list[float]] = defaultdict(list)
     totals = []
     deadline = time.monotonic() + args.seconds
@@ -80,8 +95,33 @@ def bench_pipeline(pairs, args) -> None:
     print(
         f"  pipeline (no ROS)   {1000.0 / np.mean(totals):6.1f} pairs/s"
         f"  p50 {pct(totals, 50):.1f} ms  p95 {pct(totals, 95):.1f} ms  [{n} pairs]"
+        f"  CPU {(cpu_seconds() - cpu0) * 1e3 / n:.1f} ms/pair"
     )
     print(f"      stages ms: {stage_line(per_stage)}")
+    bench_pipeline_threaded(pipeline, pairs, args)
+
+
+def bench_pipeline_threaded(pipeline, pairs, args) -> None:
+    """Match pair n+1 on a second thread while pair n is estimated (the node's two stages)."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    cpu0 = cpu_seconds()
+    start = time.perf_counter()
+    deadline = time.monotonic() + args.seconds
+    n = 0
+    with ThreadPoolExecutor(1) as matcher:
+        pending = matcher.submit(pipeline.match, *pairs[0])
+        while time.monotonic() < deadline:
+            matched = pending.result()
+            pending = matcher.submit(pipeline.match, *pairs[(n + 1) % len(pairs)])
+            pipeline.estimate(matched)
+            n += 1
+        pending.result()
+    elapsed = time.perf_counter() - start
+    print(
+        f"  pipeline 2 threads  {n / elapsed:6.1f} pairs/s  [{n} pairs]"
+        f"  CPU {(cpu_seconds() - cpu0) * 1e3 / n:.1f} ms/pair"
+    )
 
 
 class Feeder:
@@ -146,7 +186,7 @@ class Feeder:
         self.rclpy.try_shutdown(context=self.context)
 
 
-def summarize(label, feeder, sent_stamps, seconds):
+def summarize(label, feeder, sent_stamps, seconds, cpu_s):
     time.sleep(1.0)
     with feeder.lock:
         got = [feeder.answers[s] for s in sent_stamps if s in feeder.answers]
@@ -165,6 +205,7 @@ def summarize(label, feeder, sent_stamps, seconds):
         f"  latency p50 {pct(latency, 50):.1f} p95 {pct(latency, 95):.1f} ms"
         f"  end-to-end p50 {pct(e2e, 50):.1f} p95 {pct(e2e, 95):.1f} ms"
         f"  max wait {max(wait, default=float('nan')):.1f} ms"
+        f"  node CPU {cpu_s * 1e3 / max(1, len(got)):.1f} ms/pair"
     )
     print(f"      stages ms: {stage_line(per_stage)}")
 
@@ -191,6 +232,7 @@ def bench_node(pairs, args, name: str) -> None:
             feeder.send(msgs[k % len(msgs)], stamp)
             time.sleep(0.3)
         # paced at args.rate pairs/s
+        cpu0 = cpu_seconds(proc.pid)
         sent = []
         period = 1.0 / args.rate
         start = time.monotonic()
@@ -202,8 +244,10 @@ def bench_node(pairs, args, name: str) -> None:
             feeder.send(msgs[k % len(msgs)], stamp)
             sent.append(stamp)
             k += 1
-        summarize(f"node @{args.rate:g} Hz", feeder, sent, args.seconds)
+        cpu_s = cpu_seconds(proc.pid) - cpu0
+        summarize(f"node @{args.rate:g} Hz", feeder, sent, args.seconds, cpu_s)
         # closed loop
+        cpu0 = cpu_seconds(proc.pid)
         sent = []
         start = time.monotonic()
         k = 0
@@ -218,7 +262,9 @@ def bench_node(pairs, args, name: str) -> None:
                     if stamp in feeder.answers:
                         break
                 time.sleep(0.0005)
-        summarize("node closed loop", feeder, sent, time.monotonic() - start)
+        elapsed = time.monotonic() - start
+        cpu_s = cpu_seconds(proc.pid) - cpu0
+        summarize("node closed loop", feeder, sent, elapsed, cpu_s)
     finally:
         feeder.close()
         proc.send_signal(signal.SIGINT)
@@ -251,6 +297,7 @@ def main() -> int:
         print(f"{name}:")
         bench_pipeline(pairs, args)
         bench_node(pairs, args, name)
+        print(f"  (load average now {os.getloadavg()[0]:.1f})")
     return 0
 
 

@@ -21,6 +21,10 @@ then thrown away. Each pair goes through exactly the calls of :meth:`Pipeline.pr
 config it was matched with, so the results equal offline processing. Threads of our own are used
 rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
 several estimations at once on 2 cores would only raise everyone's latency.
+
+For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
+OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core
+after every large product and take it from the match thread.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ from collections import Counter, deque
 from dataclasses import dataclass
 from typing import Any
 
+import cv2
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -52,6 +57,7 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header
+from threadpoolctl import threadpool_limits
 
 from sepfm_ros.geometry import METHODS
 from sepfm_ros.pipeline.drawing import draw_result
@@ -258,6 +264,17 @@ def release_free_memory() -> None:
     """
     if _MALLOC_TRIM is not None:
         _MALLOC_TRIM(0)
+
+
+def limit_thread_pools(threads: int = 1) -> None:
+    """Run OpenCV's and the BLAS's internal parallel loops on ``threads`` threads (process-wide).
+
+    The node already runs two worker threads (see the module docstring) on machines with few
+    cores; native pools on top of them only oversubscribe the cores (OpenBLAS workers also
+    busy-wait after each call). Results do not change: only how the work is scheduled.
+    """
+    cv2.setNumThreads(int(threads))
+    threadpool_limits(limits=int(threads), user_api="blas")
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -731,6 +748,7 @@ def main(argv: list[str]) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.parse_args(own)
+    limit_thread_pools(1)
     rclpy.init(args=["sepfm", *argv])
     node = None
     try:

@@ -20,7 +20,7 @@ from sepfm_ros.geometry.solvers import eight_point, seven_point
 SCORINGS = ("msac", "lmeds")
 #: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the
 #: Sampson refinement is left to the final model).
-LO_FACTORS = (3.0, 2.0, 1.0)
+LO_FACTORS = (2.0, 1.0)
 
 
 def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:

@@ -17,7 +17,7 @@ from sepfm_ros.geometry.epipolar import (
 )
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
-REFIT_FACTORS = (3.0, 2.0, 1.5, 1.0, 1.0, 1.0)
+REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 
 def _solve_rows(rows: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:

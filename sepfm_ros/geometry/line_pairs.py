@@ -46,7 +46,7 @@ class LineSearchOptions:
     min_votes: int = 4
     distance: float = 1.5
     hough_points: int = 300
-    max_lines: int = 150
+    max_lines: int = 80
     max_pairs: int = 6
 
 

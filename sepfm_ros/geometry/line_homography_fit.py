@@ -122,7 +122,9 @@ def fit_line_homography(
         len1 = float(np.linalg.norm(ctrl1[1] - ctrl1[0])) * scale1
         len2 = float(np.linalg.norm(ctrl2[1] - ctrl2[0])) * scale2
         prob = LineHomographyProblem(t1, t2, len1, len2, threshold)
-        res = run_ransac([prob], rng, confidence=confidence, max_samples=max_samples)
+        res = run_ransac(
+            [prob], rng, confidence=confidence, max_samples=max_samples, max_extra_lo=0
+        )
         hyps += res.hypotheses
         if res.model is None:
             continue

@@ -614,11 +614,9 @@ def test_stereo_camera_stops_warns_within_2s_and_resumes(robust, frames, figures
             time.sleep(period)
         return stamps, last
 
-    stream(2.0, ("left", "right"))
+    _, t_stop = stream(2.0, ("left", "right"))  # t_stop: the right camera's last image
     with client.lock:
         n_log = len(client.health_log)
-    _, _ = stream(0.0, ())
-    t_stop = time.monotonic()  # the right camera's last image went out in the call before
     stream(3.0, ("left",))
     with client.lock:
         log = client.health_log[n_log:]

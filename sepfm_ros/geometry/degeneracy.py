@@ -20,7 +20,11 @@ wrong F is the better one by any inlier-counting cost. So the check also asks wh
 *off the plane* is more than chance: the off-plane matches are re-paired at random (pts2
 shuffled) and counted against F the same way; the off-plane inliers must exceed that chance
 count by ``min_excess`` and by three standard deviations, otherwise F is flagged as determined by
-the plane alone (``reason``).
+the plane alone (``reason``). Only matches with clear parallax count as off the plane (transfer
+error over ``parallax_factor`` times the homography tolerance): matches just off the plane
+(mislocalised or near-miss matches of a planar scene, or a purely rotating camera) agree with
+some member of the plane's family of F far more often than chance, and the estimator picks
+exactly that member.
 """
 
 from __future__ import annotations
@@ -103,6 +107,7 @@ def plane_and_parallax(
     max_candidates: int = 300,
     min_excess: int = 8,
     shuffles: int = 8,
+    parallax_factor: float = 2.0,
 ) -> PlaneCheck:
     """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
 
@@ -115,6 +120,8 @@ def plane_and_parallax(
         max_candidates: off-plane pairs tried (all pairs when there are fewer).
         min_excess: off-plane inliers needed beyond the chance count (see the module docstring).
         shuffles: random re-pairings averaged for the chance count.
+        parallax_factor: a match counts as off the plane (evidence for F) when its transfer
+            error exceeds this times the homography tolerance (2 x ``threshold``).
     Returns:
         A :class:`PlaneCheck`.
     """
@@ -129,9 +136,11 @@ def plane_and_parallax(
     H, _ = cv2.findHomography(pts1, pts2, cv2.RANSAC, tol, maxIters=500, confidence=0.995)
     if H is None:
         return out
-    on = transfer_error(H, pts1, pts2) < tol
+    err_h = transfer_error(H, pts1, pts2)
+    on = err_h < tol
+    far = err_h > parallax_factor * tol  # clear parallax: evidence about F beyond the plane
     out.plane_inliers = int(np.count_nonzero(on & inl))
-    out.off_plane_inliers = int(np.count_nonzero(~on & inl))
+    out.off_plane_inliers = int(np.count_nonzero(far & inl))
     if out.plane_inliers < plane_share * np.count_nonzero(inl):
         return out
     out.planar = True
@@ -141,7 +150,7 @@ def plane_and_parallax(
         return out
     # cheap test first: an F whose support off the plane is well above chance is determined by
     # the data; only an F without it is challenged by plane-and-parallax candidates
-    out.off_plane_chance = chance_inliers(F, pts1[off], pts2[off], threshold, rng, shuffles)
+    out.off_plane_chance = chance_inliers(F, pts1[far], pts2[far], threshold, rng, shuffles)
     if out.off_plane_inliers - out.off_plane_chance >= max(
         min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)
     ):
@@ -173,8 +182,8 @@ def plane_and_parallax(
         out.replaced = True
         new_inl = _sed(out.F, pts1, pts2) < threshold
         out.plane_inliers = int(np.count_nonzero(on & new_inl))
-        out.off_plane_inliers = int(np.count_nonzero(~on & new_inl))
-    out.off_plane_chance = chance_inliers(out.F, pts1[off], pts2[off], threshold, rng, shuffles)
+        out.off_plane_inliers = int(np.count_nonzero(far & new_inl))
+    out.off_plane_chance = chance_inliers(out.F, pts1[far], pts2[far], threshold, rng, shuffles)
     excess = out.off_plane_inliers - out.off_plane_chance
     if excess < max(min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)):
         out.reason = (

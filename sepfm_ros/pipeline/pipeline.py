@@ -184,6 +184,8 @@ class Pipeline:
     def __init__(self, config: PipelineConfig | None = None, cache_size: int = 4) -> None:
         self._cache: OrderedDict[Hashable, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._cache_size = int(cache_size)
+        self.images_detected = 0  # images whose features were computed
+        self.images_cached = 0  # images whose features came from the cache
         self._config = PipelineConfig()
         self._detector = None
         self.configure(config or PipelineConfig())
@@ -214,8 +216,10 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         if key is not None and key in self._cache:
             self._cache.move_to_end(key)
+            self.images_cached += 1
             return self._cache[key]
         feats = detect(image, self._detector)
+        self.images_detected += 1
         if key is not None and self._cache_size > 0:
             self._cache[key] = feats
             while len(self._cache) > self._cache_size:

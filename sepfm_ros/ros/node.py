@@ -15,12 +15,14 @@ dropped, so nothing queues without bound. Two worker threads then run the
   publishes.
 
 The match thread starts a pair only when the hand-over slot is empty, so it runs at most one pair
-ahead of the estimator and matches the newest pair just before the estimator can take it: on two
-cores the features of pair n+1 are computed while pair n is estimated, and no pair is matched and
-then thrown away. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
-config it was matched with, so the results equal offline processing. Threads of our own are used
-rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
-several estimations at once on 2 cores would only raise everyone's latency.
+ahead of the estimator, and it starts when the estimator's expected remaining time (recent medians
+of both stages) drops to the expected matching time, so it matches the newest pair just before
+the estimator can take it: on two cores the features of pair n+1 are computed while pair n is
+estimated, and no pair is matched and then thrown away. Each pair goes through exactly the calls
+of :meth:`Pipeline.process` with the config it was matched with, so the results equal offline
+processing. Threads of our own are used rather than a MultiThreadedExecutor because the
+latest-only slots are needed anyway and running several estimations at once on 2 cores would
+only raise everyone's latency.
 
 For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
 OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core
@@ -32,6 +34,7 @@ from __future__ import annotations
 import argparse
 import ctypes
 import ctypes.util
+import statistics
 import threading
 import time
 import traceback
@@ -152,6 +155,11 @@ PARAMS: dict[str, ParamSpec] = {
     ),
 }
 
+# The match thread starts this much earlier than the estimator is expected to need its result,
+# and never waits longer than MAX_MATCH_DELAY_S for the estimator (see _match_start_delay).
+MATCH_START_MARGIN_S = 0.004
+MAX_MATCH_DELAY_S = 0.05
+
 # How often input silence is checked (a change of the health level is reported at once).
 STALL_CHECK_PERIOD_S = 0.1
 
@@ -230,6 +238,23 @@ class Job:
     key_b: Any
 
 
+class RecentMedian:
+    """Median of a stage's last few durations (seconds): robust to one slow pair."""
+
+    def __init__(self, size: int = 9, warmup: int = 3) -> None:
+        self._values: deque[float] = deque(maxlen=size)
+        self._warmup = warmup
+        self.value = 0.0
+
+    @property
+    def ready(self) -> bool:
+        return len(self._values) >= self._warmup
+
+    def add(self, seconds: float) -> None:
+        self._values.append(seconds)
+        self.value = statistics.median(self._values)
+
+
 @dataclass
 class MatchedJob:
     """A matched pair waiting for the estimate thread."""
@@ -299,6 +324,9 @@ class SepfmNode(Node):
         self._cond = threading.Condition(self._lock)
         self._slot: Job | None = None  # newest pair, waiting for the match thread
         self._matched: MatchedJob | None = None  # matched pair, waiting for the estimate thread
+        self._estimating_since: float | None = None  # monotonic start of the current estimate
+        self._match_s = RecentMedian()  # seconds per stage, to time the start of matching
+        self._estimate_s = RecentMedian()
         self._stop = False
         self._pending_config: PipelineConfig | None = None
         self._pipeline = Pipeline(pipeline_config(values), cache_size=8)
@@ -509,14 +537,21 @@ class SepfmNode(Node):
         """Thread ``sepfm-match``: newest pair -> decoded images -> matches -> hand-over slot."""
         while True:
             with self._cond:
-                while (self._slot is None or self._matched is not None) and not self._stop:
-                    self._cond.wait()
+                while not self._stop:
+                    if self._slot is None or self._matched is not None:
+                        self._cond.wait()
+                        continue
+                    delay = self._match_start_delay(time.monotonic())
+                    if delay <= 0.0:
+                        break
+                    self._cond.wait(timeout=delay)  # a newer pair may arrive meanwhile
                 if self._stop:
                     return
                 job, self._slot = self._slot, None
                 config, self._pending_config = self._pending_config, None
             if config is not None:
                 self._pipeline.configure(config)
+            t0 = time.monotonic()
             try:
                 matched = self._match(job)
             except ImageDecodeError as err:
@@ -527,8 +562,22 @@ class SepfmNode(Node):
                 self._internal_error(job, err)
                 continue
             with self._cond:
+                self._match_s.add(time.monotonic() - t0)
                 self._matched = matched
                 self._cond.notify_all()
+
+    def _match_start_delay(self, now: float) -> float:
+        """Seconds the match thread should still wait before taking the newest pair (<= 0: go).
+
+        Matching a pair long before the estimator is free only makes the pair older when it is
+        estimated: the match thread starts when the estimator's expected remaining time (running
+        medians of both stages) drops to the expected matching time, plus a margin so that the
+        estimator does not wait for it. Caller holds the lock.
+        """
+        if self._estimating_since is None or not (self._match_s.ready and self._estimate_s.ready):
+            return 0.0
+        remaining = self._estimate_s.value - (now - self._estimating_since)
+        return min(remaining - self._match_s.value - MATCH_START_MARGIN_S, MAX_MATCH_DELAY_S)
 
     def _estimate_loop(self) -> None:
         """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
@@ -539,11 +588,16 @@ class SepfmNode(Node):
                 if self._stop:
                     return
                 matched, self._matched = self._matched, None
-                self._cond.notify_all()  # the match thread may take the next pair now
+                self._estimating_since = t0 = time.monotonic()
+                self._cond.notify_all()  # the match thread may prepare the next pair now
             try:
                 self._estimate_and_publish(matched)
             except Exception as err:  # keep serving; count and log once per kind
                 self._internal_error(matched.job, err)
+            with self._cond:
+                self._estimate_s.add(time.monotonic() - t0)
+                self._estimating_since = None
+                self._cond.notify_all()
 
     def _internal_error(self, job: Job, err: Exception) -> None:
         kind = f"internal_{type(err).__name__}"
@@ -644,6 +698,9 @@ class SepfmNode(Node):
             values["estimation_not_ok"] = self._failed
             values["synchronized_pairs"] = self._pairs
             values["dropped_pairs"] = self._dropped
+            # motion mode: each frame detected once (its features are cached by stamp)
+            values["images_detected"] = self._pipeline.images_detected
+            values["images_features_cached"] = self._pipeline.images_cached
             if self._mode == "stereo":
                 values["sync_unmatched"] = self._sync.stats.unmatched + self._sync.stats.evicted
                 values["sync_late"] = self._sync.stats.late

@@ -123,3 +123,66 @@ def test_duplicate_correspondences_are_removed_best_first():
     m = unique_matches(Matches(pts_a, pts_b, np.array([0.1, 0.2, 0.3, 0.4])))
     np.testing.assert_array_equal(m.ratio, [0.1, 0.2, 0.4])
     np.testing.assert_array_equal(m.pts_b, [[5.0, 6.0], [7.0, 8.0], [5.0, 9.0]])
+
+
+def _reference_matches(pts_a, desc_a, pts_b, desc_b, features, ratio):
+    """Lowe-ratio matches from OpenCV's BFMatcher.knnMatch, one Python loop (the plain way)."""
+    norm = cv2.NORM_HAMMING if features == "orb" else cv2.NORM_L2
+    rows = []
+    for m, n in cv2.BFMatcher(norm).knnMatch(desc_a, desc_b, k=2):
+        r = m.distance / n.distance if n.distance > 0 else (0.0 if m.distance == 0 else 1.0)
+        if r < ratio:
+            rows.append((r, m.queryIdx, m.trainIdx))
+    rows.sort(key=lambda row: row[0])  # stable: ties keep the order of image a
+    seen_b, seen_pair, out = set(), set(), []
+    for r, ia, ib in rows:
+        if ib in seen_b:  # one match per point of b: the best
+            continue
+        seen_b.add(ib)
+        pair = (*pts_a[ia], *pts_b[ib])
+        if pair not in seen_pair:  # SIFT: one location, several orientations
+            seen_pair.add(pair)
+            out.append((r, ia, ib))
+    out.sort(key=lambda row: row[0])
+    return out
+
+
+@pytest.mark.parametrize("features", ["orb", "sift"])
+def test_vectorised_matching_equals_opencv_knn_matcher(shared_data, features):
+    from sepfm_ros.pipeline.features import detect, make_detector, match_descriptors
+
+    detector = make_detector(features, 500)
+    names = ("kitti_stereo", "temple_motion")
+    for (pa, da), (pb, db) in (
+        (detect(load(shared_data, p), detector) for p in PAIRS[n]) for n in names
+    ):
+        for ratio in (0.6, 0.8, 1.0):
+            m = match_descriptors(pa, da, pb, db, features, ratio)
+            ref = _reference_matches(pa, da, pb, db, features, ratio)
+            assert len(m) == len(ref) > 20
+            np.testing.assert_array_equal(m.ratio, [r for r, _, _ in ref])
+            np.testing.assert_array_equal(m.pts_a, pa[[ia for _, ia, _ in ref]])
+            np.testing.assert_array_equal(m.pts_b, pb[[ib for _, _, ib in ref]])
+
+
+def test_match_and_estimate_on_two_threads_equal_process(shared_data):
+    """The node's two stages (match pair n+1 while pair n is estimated) change no result."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    pairs = [tuple(load(shared_data, p) for p in PAIRS[n]) for n in sorted(PAIRS)] * 2
+    config = PipelineConfig(seed=5)
+    expected = [Pipeline(config).process(a, b) for a, b in pairs]
+    pipeline = Pipeline(config)
+    got = []
+    with ThreadPoolExecutor(1) as matcher:
+        pending = matcher.submit(pipeline.match, *pairs[0])
+        for k in range(len(pairs)):
+            matched = pending.result()
+            if k + 1 < len(pairs):
+                pending = matcher.submit(pipeline.match, *pairs[k + 1])
+            got.append(pipeline.estimate(matched))
+    for e, g in zip(expected, got, strict=True):
+        np.testing.assert_array_equal(e.estimate.F, g.estimate.F)
+        np.testing.assert_array_equal(e.estimate.inliers, g.estimate.inliers)
+        np.testing.assert_array_equal(e.matches.pts_b, g.matches.pts_b)
+        assert e.estimate.hypotheses == g.estimate.hypotheses

@@ -133,7 +133,7 @@ def plane_and_parallax(
         return out
     # a robust H on all matches (the plane may hold matches F rejected); seeded via OpenCV's RNG
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    H, _ = cv2.findHomography(pts1, pts2, cv2.RANSAC, tol, maxIters=500, confidence=0.995)
+    H, _ = cv2.findHomography(pts1, pts2, cv2.RHO, tol, maxIters=500, confidence=0.995)
     if H is None:
         return out
     err_h = transfer_error(H, pts1, pts2)

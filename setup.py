@@ -67,7 +67,7 @@ setup(
         "test": [
             "pytest>=7",
             "hypothesis>=6",
-            "ruff>=0.5",
+            "ruff==0.17.6",  # pinned: lint and format rules change between releases
             "colcon-core",
             "colcon-ros",
             "poselib",

@@ -4,8 +4,8 @@
     python scripts/make_bundled_bags.py [--force]
 
 Each bag is a synthetic "street" scene (textured planes with straight edges, known cameras, so the
-ground-truth F is exact) at 2 frames per second (a rate the node keeps up with on busy 2-core machines while
-the demo also records its debug image), zstd-compressed mcap chunks:
+ground-truth F is exact) at 2 frames per second (a rate the node keeps up with on busy 2-core
+machines while the demo also records its debug image), zstd-compressed mcap chunks:
 
 - ``bags/synthetic_stereo``: 12 stereo frames, mono8, ``/left/image_raw`` + ``/right/image_raw``;
 - ``bags/synthetic_motion``: 13 frames (12 pairs), PNG ``/image_raw/compressed`` (the node's

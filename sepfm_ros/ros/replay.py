@@ -333,6 +333,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 
 def main(argv: list[str]) -> int:
     import rclpy
+
     # Own arguments come before --ros-args: rcl's remove_ros_args would also take our
     # "--remap FROM:=TO" values for (deprecated-syntax) ROS remap rules.
     split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)

@@ -90,6 +90,7 @@ def replay_through_node(
     ``reliable_inputs`` the node's input subscriptions are made reliable (QoS override).
     """
     import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
     from sepfm_ros.ros.bag_io import BagWriter
@@ -123,6 +124,15 @@ def replay_through_node(
         topics.append("/sepfm/debug_image")
     writer = BagWriter(out, flush_interval_s=1.0)
     recorder = Recorder(node, writer, topics)
+    input_publishers = [0]  # the node's own count of matched input publishers (/diagnostics)
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            for kv in status.values:
+                if kv.key == "input_publishers" and kv.value.isdigit():
+                    input_publishers[0] = int(kv.value)
+
+    node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     stop = threading.Event()
 
     def spin() -> None:
@@ -143,7 +153,13 @@ def replay_through_node(
                 raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
             time.sleep(0.05)
         replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
-        time.sleep(1.5)  # let the node's side of discovery settle too (matching is one-sided)
+        # matching is one-sided: also wait until the node's inputs have matched our publishers
+        # (its /diagnostics reports them), or the first messages can be lost
+        while input_publishers[0] < 1:
+            if time.monotonic() > deadline:
+                raise BagError("the node's inputs did not match the player within the timeout")
+            time.sleep(0.05)
+        time.sleep(0.2)
         published = replayer.run(progress=progress)
         info_topic = output_topics()["estimate_info"]
         last, last_count = time.monotonic(), -1

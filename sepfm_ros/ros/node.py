@@ -693,6 +693,9 @@ class SepfmNode(Node):
                 rate = (self._received[topic] - received_last[topic]) / dt
                 values[f"input_rate_{topic}_hz"] = rate
                 values[f"received_{topic}"] = self._received[topic]
+            # publishers matched by the input subscriptions (the fewest over the inputs): a player
+            # can wait for this before sending, since a message sent before matching is lost
+            values["input_publishers"] = min(s.get_publisher_count() for s in self._subs)
             values["output_rate_hz"] = (self._published - published_last) / dt
             values["published"] = self._published
             values["estimation_not_ok"] = self._failed

@@ -63,7 +63,7 @@ def _fmt_hyp(vals: list) -> str:
 
 
 def report(ratio: float, rows: dict) -> str:
-    out = [f"### SIFT ratio {ratio}", ""]
+    out = [f"**SIFT ratio {ratio}**", ""]
     n = len(rows["sep5"])
     outl = np.array([r["out"] for r in rows["sep5"]])
     out.append(f"{n} runs; outlier rate (matches > 1 px from GT F): median {np.median(outl):.2f},"
@@ -139,7 +139,7 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{a.readme} has no {start} ... {end} markers", file=sys.stderr)
             return 2
         load = os.getloadavg()[0]
-        body = "\n".join(text).replace("## Estimator benchmark", "#### Estimator benchmark", 1)
+        body = "\n".join(text).replace("## Estimator benchmark", "Estimator benchmark", 1)
         body += f"\n(load average at the end of the run: {load:.1f} on {os.cpu_count()} cores)\n"
         head, rest = doc.split(start, 1)
         a.readme.write_text(head + start + "\n" + body + "\n" + end + rest.split(end, 1)[1])

@@ -43,7 +43,7 @@ setup(
     python_requires=">=3.10",
     install_requires=[
         "numpy>=1.24",
-        "opencv-python-headless>=4.8",
+        "opencv-contrib-python-headless>=4.8",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
         "rosbags>=0.10",
         "rosbags-image>=0.10",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second

@@ -40,11 +40,16 @@ def make_detector(features: str = "orb", max_features: int = 1000) -> cv2.Featur
     if features == "sift":
         return cv2.SIFT_create(nfeatures=int(max_features) if max_features else 0)
     if features == "akaze":
-        if not hasattr(cv2, "AKAZE_create"):
+        # OpenCV 5 moved AKAZE to the contrib module xfeatures2d (opencv-contrib-python)
+        create = getattr(cv2, "AKAZE_create", None) or getattr(
+            getattr(cv2, "xfeatures2d", None), "AKAZE_create", None
+        )
+        if create is None:
             raise ValueError(
-                f"features 'akaze' are not available in this OpenCV build ({cv2.__version__})"
+                f"features 'akaze' are not available in this OpenCV build ({cv2.__version__}); "
+                "install opencv-contrib-python-headless"
             )
-        return cv2.AKAZE_create()
+        return create()
     raise ValueError(f"unknown features {features!r}; expected one of {FEATURES}")
 
 

@@ -261,8 +261,11 @@ class Replayer:
             dynamic_ncols=True,
         )
         try:
+            first_pass = True
             while not self._stop.is_set():
-                base_wall[0] = time.monotonic()
+                if not first_pass:  # a new loop: bag time (and /clock) starts again
+                    base_wall[0] = time.monotonic()
+                first_pass = False
                 for msg in self.reader.messages(self.topics, start_ns=self.start_ns):
                     target = base_wall[0] + (msg.log_time_ns - self.start_ns) / 1e9 / self.rate
                     while not self._stop.is_set():

@@ -124,13 +124,14 @@ def replay_through_node(
         topics.append("/sepfm/debug_image")
     writer = BagWriter(out, flush_interval_s=1.0)
     recorder = Recorder(node, writer, topics)
-    input_publishers = [0]  # the node's own count of matched input publishers (/diagnostics)
+    # the node's own counts of matched input publishers and output subscribers (/diagnostics)
+    node_matched = {"input_publishers": 0, "output_subscribers": 0}
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
             for kv in status.values:
-                if kv.key == "input_publishers" and kv.value.isdigit():
-                    input_publishers[0] = int(kv.value)
+                if kv.key in node_matched and kv.value.isdigit():
+                    node_matched[kv.key] = int(kv.value)
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, 10)
     stop = threading.Event()
@@ -154,10 +155,11 @@ def replay_through_node(
             time.sleep(0.05)
         replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
         # matching is one-sided: also wait until the node's inputs have matched our publishers
-        # (its /diagnostics reports them), or the first messages can be lost
-        while input_publishers[0] < 1:
+        # and its result publishers our recorder (its /diagnostics reports both), or the first
+        # messages can be lost
+        while node_matched["input_publishers"] < 1 or node_matched["output_subscribers"] < 1:
             if time.monotonic() > deadline:
-                raise BagError("the node's inputs did not match the player within the timeout")
+                raise BagError("the node did not match the player and recorder within the timeout")
             time.sleep(0.05)
         time.sleep(0.2)
         published = replayer.run(progress=progress)

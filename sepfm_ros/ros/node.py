@@ -696,6 +696,10 @@ class SepfmNode(Node):
             # publishers matched by the input subscriptions (the fewest over the inputs): a player
             # can wait for this before sending, since a message sent before matching is lost
             values["input_publishers"] = min(s.get_publisher_count() for s in self._subs)
+            # and subscribers matched by the result publishers (the fewest over F, matches, info)
+            values["output_subscribers"] = min(
+                p.get_subscription_count() for p in (self._pub_f, self._pub_matches, self._pub_info)
+            )
             values["output_rate_hz"] = (self._published - published_last) / dt
             values["published"] = self._published
             values["estimation_not_ok"] = self._failed

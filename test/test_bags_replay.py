@@ -21,10 +21,12 @@ from sepfm_ros.ros.process import parse_params, run_process
 from sepfm_ros.ros.results import read_results
 
 SEED = 7
+# 20 pairs each: "an F for at least 95 % of frame pairs" then tolerates one lost pair (with 10
+# it would demand all; on loaded CI machines the first KITTI stereo pair was occasionally lost)
 SHARED_BAGS = {  # name -> (sequence, first frame, frames)
-    "kitti_stereo": ("kitti_stereo", 0, 10),
-    "kitti_motion": ("kitti_motion", 20, 11),
-    "templeRing": ("templeRing", 5, 11),
+    "kitti_stereo": ("kitti_stereo", 0, 20),
+    "kitti_motion": ("kitti_motion", 20, 21),
+    "templeRing": ("templeRing", 5, 21),
 }
 BAG_RATE_HZ = 1.0  # KITTI pairs take 110-250 ms (more under load) on shared 2-core machines
 

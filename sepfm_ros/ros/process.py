@@ -60,6 +60,7 @@ from sepfm_ros.ros.messages import (
     stamp_ns,
 )
 from sepfm_ros.ros.node import PARAMS, parameter_error, pipeline_config
+from sepfm_ros.ros.replay import raise_keyboard_interrupt
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
     format_summary,
@@ -335,10 +336,6 @@ def process_pair(
     return out
 
 
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
-
-
 def _parse(argv: list[str]) -> argparse.Namespace:
     p = argparse.ArgumentParser(
         prog="sepfm_ros process",
@@ -373,7 +370,7 @@ def print_done(k: int, total: int, stamp: int) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parse(argv)
-    previous = signal.signal(signal.SIGTERM, _raise_interrupt)
+    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
     interrupted = False
     try:
         params = parse_params(args.param)

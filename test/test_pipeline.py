@@ -115,8 +115,7 @@ def test_draw_result_shape(shared_data):
 
 
 def test_duplicate_correspondences_are_removed_best_first():
-    from sepfm_ros.pipeline.features import Matches
-    from sepfm_ros.pipeline.pipeline import unique_matches
+    from sepfm_ros.pipeline.features import Matches, unique_matches
 
     pts_a = np.array([[1.0, 2.0], [3.0, 4.0], [1.0, 2.0], [1.0, 2.0]])
     pts_b = np.array([[5.0, 6.0], [7.0, 8.0], [5.0, 6.0], [5.0, 9.0]])

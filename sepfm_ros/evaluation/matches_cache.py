@@ -18,8 +18,8 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairSpec
-from sepfm_ros.pipeline.features import FEATURES, Matches, match_images
-from sepfm_ros.pipeline.pipeline import detector_available, unique_matches
+from sepfm_ros.pipeline.features import FEATURES, Matches, match_images, unique_matches
+from sepfm_ros.pipeline.pipeline import detector_available
 
 #: Bumped when the cached content or its meaning changes.
 CACHE_VERSION = 1
@@ -114,7 +114,7 @@ class MatchesCache:
     def matches(self, pair: PairSpec) -> PairMatches:
         """Distinct matches of ``pair``, best first (points entries as given, not cached).
 
-        Repeated correspondences are dropped (``pipeline.unique_matches``): SIFT reports a
+        Repeated correspondences are dropped (``features.unique_matches``): SIFT reports a
         location once per orientation, and the estimators reject duplicates.
         """
         pm = self._raw_matches(pair)

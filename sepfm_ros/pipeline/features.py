@@ -156,13 +156,26 @@ def match_descriptors(
     order = np.argsort(rr, kind="stable")
     ia, ib, rr = ia[order], ib[order], rr[order]
     # keep the best match per point in image b (one-to-one on b's side), then drop repeated
-    # correspondences (SIFT reports a keypoint once per dominant orientation)
+    # correspondences
     _, first = np.unique(ib, return_index=True)
     keep = np.sort(first)
-    pa, pb, rr = pts_a[ia[keep]], pts_b[ib[keep]], rr[keep]
-    _, first = np.unique(np.concatenate([pa, pb], axis=1), axis=0, return_index=True)
+    return unique_matches(Matches(pts_a[ia[keep]], pts_b[ib[keep]], rr[keep]))
+
+
+def unique_matches(matches: Matches) -> Matches:
+    """Drop repeated correspondences (same pts_a and pts_b), keeping the first (best) of each.
+
+    SIFT can return one location several times (one per orientation); estimators reject
+    duplicate correspondences, and they carry no information.
+    """
+    if len(matches) < 2:
+        return matches
+    both = np.concatenate([matches.pts_a, matches.pts_b], axis=1)
+    _, first = np.unique(both, axis=0, return_index=True)
+    if len(first) == len(matches):
+        return matches
     keep = np.sort(first)
-    return Matches(pa[keep], pb[keep], rr[keep])
+    return Matches(matches.pts_a[keep], matches.pts_b[keep], matches.ratio[keep])
 
 
 def match_images(

@@ -109,22 +109,6 @@ def detector_available(features: str) -> bool:
     return True
 
 
-def unique_matches(matches: Matches) -> Matches:
-    """Drop repeated correspondences (same pts_a and pts_b), keeping the first (best) of each.
-
-    SIFT can return one location several times (one per orientation); estimators reject
-    duplicate correspondences, and they carry no information.
-    """
-    if len(matches) < 2:
-        return matches
-    both = np.concatenate([matches.pts_a, matches.pts_b], axis=1)
-    _, first = np.unique(both, axis=0, return_index=True)
-    if len(first) == len(matches):
-        return matches
-    keep = np.sort(first)
-    return Matches(matches.pts_a[keep], matches.pts_b[keep], matches.ratio[keep])
-
-
 @dataclass
 class MatchedPair:
     """The first half of a pipeline result (see :meth:`Pipeline.match`).
@@ -252,7 +236,6 @@ class Pipeline:
 
         t0 = time.perf_counter()
         matches = match_descriptors(pts_a, desc_a, pts_b, desc_b, cfg.features, cfg.ratio)
-        matches = unique_matches(matches)
         if cfg.max_matches and len(matches) > cfg.max_matches:
             k = cfg.max_matches
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])

@@ -151,11 +151,20 @@ class Client:
         while time.monotonic() < deadline:
             inputs = all(p.get_subscription_count() > 0 for p in self.pubs.values())
             outputs = self.ros.node.count_publishers(f"/{self.node_name}/estimate_info") > 0
-            if inputs and outputs and self._set.service_is_ready():
-                time.sleep(0.3)  # let the node's side of discovery settle too
+            if inputs and outputs and self._set.service_is_ready() and self._node_side_matched():
                 return
             time.sleep(0.05)
         raise AssertionError(f"node {self.node_name} not connected within {timeout} s")
+
+    def _node_side_matched(self) -> bool:
+        """Matching is one-sided: the node's own /diagnostics must also report its inputs
+        matched to publishers and its results to subscribers, or the first pair can be lost."""
+        with self.lock:
+            last = self.health[-1] if self.health else {}
+        return (
+            int(last.get("input_publishers", 0)) >= 1
+            and int(last.get("output_subscribers", 0)) >= 1
+        )
 
     def publish(self, key: str, msg) -> None:
         self.pubs[key].publish(msg)

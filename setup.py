@@ -55,6 +55,11 @@ setup(
         # dependencies.
         "matplotlib>=3.5",
         "tqdm>=4.60",
+        # the estimator's hot loops (scoring, refits, solvers) compiled to machine code: numpy
+        # call overhead dominated at a few hundred matches. numba's np.linalg needs SciPy's
+        # LAPACK. python3-numba and python3-scipy in package.xml.
+        "numba>=0.59",
+        "scipy>=1.10",
     ],
     extras_require={
         # ROS 2 Jazzy from PyPI wheels, for machines without a ROS install (colcon users get these

@@ -12,13 +12,11 @@ from sepfm_ros.geometry.epipolar import (
     normalization_transform,
     symmetric_epipolar_distance_h,
 )
-from sepfm_ros.geometry.solvers.design import epipolar_rows
 
 
 @dataclass
 class Correspondences:
     """pts1, pts2: (N, 2) pixels. x1, x2: (N, 2) normalised by T1, T2 (3, 3).
-    rows: (N, 9) rows of x2^T F_n x1 = 0 in the normalised coordinates.
     X1, X2: (3, N) homogeneous pixel coordinates (for scoring)."""
 
     pts1: np.ndarray
@@ -27,7 +25,6 @@ class Correspondences:
     x2: np.ndarray
     T1: np.ndarray
     T2: np.ndarray
-    rows: np.ndarray
     X1: np.ndarray
     X2: np.ndarray
 
@@ -35,10 +32,11 @@ class Correspondences:
     def from_pixels(cls, pts1: np.ndarray, pts2: np.ndarray) -> Correspondences:
         T1 = normalization_transform(pts1)
         T2 = normalization_transform(pts2)
-        x1, x2 = apply_transform(T1, pts1), apply_transform(T2, pts2)
+        x1 = np.ascontiguousarray(apply_transform(T1, pts1))
+        x2 = np.ascontiguousarray(apply_transform(T2, pts2))
         X1 = np.ascontiguousarray(homogeneous(pts1).T)
         X2 = np.ascontiguousarray(homogeneous(pts2).T)
-        return cls(pts1, pts2, x1, x2, T1, T2, epipolar_rows(x1, x2), X1, X2)
+        return cls(pts1, pts2, x1, x2, T1, T2, X1, X2)
 
     def distances(self, F: np.ndarray) -> np.ndarray:
         """Symmetric epipolar distances (px) of (3, 3) -> (N,) or (M, 3, 3) -> (M, N) models."""

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 
@@ -39,39 +40,104 @@ def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
 
     F: (M, 3, 3); X1, X2: (3, N) homogeneous points. Returns (r, l2, l1): r (M, N) =
     x2^T F x1, l2 (M, 3, N) = F x1 (lines in image 2), l1 (M, 2, N) = first two rows of F^T x2.
-    Each product is one matrix multiplication over all models (not a batch of tiny ones).
     """
     M, N = F.shape[0], X1.shape[1]
     l2 = (F.reshape(-1, 3) @ X1).reshape(M, 3, N)
     l1 = (np.ascontiguousarray(F.transpose(0, 2, 1)[:, :2]).reshape(-1, 3) @ X2).reshape(M, 2, N)
-    r = l2[:, 0] * X2[0]
-    r += l2[:, 1] * X2[1]
-    r += l2[:, 2]
+    r = l2[:, 0] * X2[0] + l2[:, 1] * X2[1] + l2[:, 2]
     return r, l2, l1
+
+
+@numba.njit(cache=True, fastmath=False)
+def _distance_one(f: np.ndarray, x: float, y: float, u: float, v: float) -> float:
+    """Symmetric epipolar distance (px) of one correspondence (x, y) <-> (u, v) under F (3, 3)."""
+    a2 = f[0, 0] * x + f[0, 1] * y + f[0, 2]  # F x1: line in image 2
+    b2 = f[1, 0] * x + f[1, 1] * y + f[1, 2]
+    c2 = f[2, 0] * x + f[2, 1] * y + f[2, 2]
+    a1 = f[0, 0] * u + f[1, 0] * v + f[2, 0]  # F^T x2: line in image 1
+    b1 = f[0, 1] * u + f[1, 1] * v + f[2, 1]
+    n2 = a2 * a2 + b2 * b2
+    n1 = a1 * a1 + b1 * b1
+    if n2 <= 0.0 or n1 <= 0.0:
+        return np.inf
+    d = 0.5 * abs(a2 * u + b2 * v + c2) * (1.0 / np.sqrt(n2) + 1.0 / np.sqrt(n1))
+    return d if np.isfinite(d) else np.inf
+
+
+@numba.njit(cache=True)
+def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
+    """(M, 3, 3) models, (>=2, N) pixel points -> (M, N) symmetric epipolar distances (px)."""
+    M, N = F.shape[0], X1.shape[1]
+    out = np.empty((M, N))
+    for m in range(M):
+        f = F[m]
+        for i in range(N):
+            out[m, i] = _distance_one(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i])
+    return out
+
+
+@numba.njit(cache=True)
+def msac_kernel(
+    F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """MSAC score of (M, 3, 3) models on (>=2, N) pixel points without an (M, N) temporary.
+
+    Returns (cost (M,), sum of min(d^2, t^2); inlier count (M,), d < t), d in px.
+    """
+    M, N = F.shape[0], X1.shape[1]
+    t2 = threshold * threshold
+    cost = np.empty(M)
+    count = np.zeros(M, dtype=np.int64)
+    for m in range(M):
+        f = F[m]
+        c = 0.0
+        k = 0
+        for i in range(N):
+            d = _distance_one(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i])
+            if d < threshold:
+                c += d * d
+                k += 1
+            else:
+                c += t2
+        cost[m] = c
+        count[m] = k
+    return cost, count
+
+
+@numba.njit(cache=True)
+def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
+    """(3, 3) -> closest rank-2 matrix (Frobenius), scaled to unit norm."""
+    U, s, Vt = np.linalg.svd(F)
+    G = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            G[i, j] = U[i, 0] * s[0] * Vt[0, j] + U[i, 1] * s[1] * Vt[1, j]
+    n = np.sqrt((G * G).sum())
+    return G / n if n > 0 else G
+
+
+@numba.njit(cache=True)
+def denormalize_unit_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
+    """T2^T F_n T1 (3, 3) at unit Frobenius norm, largest-magnitude entry positive."""
+    F = T2.T @ F_n @ T1
+    k = np.argmax(np.abs(F.ravel()))
+    n = np.sqrt((F * F).sum())
+    if n == 0:
+        return F
+    return F / n if F.ravel()[k] >= 0 else -F / n
 
 
 def symmetric_epipolar_distance_h(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
     """:func:`symmetric_epipolar_distance` of (M, 3, 3) models on homogeneous (3, N) points.
 
-    The hot path of RANSAC scoring: the homogeneous points are prepared once per estimate.
+    The hot path of RANSAC scoring (compiled): the points are prepared once per estimate.
     Returns (M, N) px, inf where an epipolar line is undefined.
     """
-    r, l2, l1 = _epipolar_terms(F, X1, X2)
-    n2 = l2[:, 0] ** 2
-    n2 += l2[:, 1] ** 2
-    n1 = l1[:, 0] ** 2
-    n1 += l1[:, 1] ** 2
-    with np.errstate(divide="ignore", invalid="ignore"):
-        np.sqrt(n2, out=n2)
-        np.sqrt(n1, out=n1)
-        np.reciprocal(n2, out=n2)
-        np.reciprocal(n1, out=n1)
-        n2 += n1
-        np.abs(r, out=r)
-        r *= n2
-    r *= 0.5
-    r[~np.isfinite(r)] = np.inf
-    return r
+    return distances_kernel(
+        np.ascontiguousarray(F, dtype=np.float64),
+        np.ascontiguousarray(X1, dtype=np.float64),
+        np.ascontiguousarray(X2, dtype=np.float64),
+    )
 
 
 def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:

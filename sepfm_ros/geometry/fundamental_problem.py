@@ -7,17 +7,52 @@ solves, scores and refines through this one class, so their comparison is fair.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.epipolar import (
-    apply_transform,
-    denormalize,
-)
+from sepfm_ros.geometry.epipolar import apply_transform, msac_kernel
 from sepfm_ros.geometry.refine import iterative_refit
-from sepfm_ros.geometry.solvers import eight_point, seven_point
+from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
+from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
 SCORINGS = ("msac", "lmeds")
+
+
+@numba.njit(cache=True)
+def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven):
+    """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
+
+    f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
+    normalised coordinates; samples: (B, k) indices; T1, T2: (3, 3) normalising transforms.
+    seven: seven-point (each real root a model) or eight-point. Returns (F (K, 3, 3) in px at
+    unit Frobenius norm, (K,) sample index of each model).
+    """
+    B, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
+    y1 = np.empty((B, f + k, 2))
+    y2 = np.empty((B, f + k, 2))
+    for b in range(B):
+        y1[b, :f] = f1
+        y2[b, :f] = f2
+        for j in range(k):
+            y1[b, f + j] = x1[samples[b, j]]
+            y2[b, f + j] = x2[samples[b, j]]
+    if seven:
+        F_n, sid = seven_point_kernel(y1, y2)
+    else:
+        F_n = eight_point_kernel(y1, y2, np.ones((B, f + k)))
+        sid = np.arange(B)
+    F = np.empty_like(F_n)
+    keep = np.zeros(F_n.shape[0], dtype=np.bool_)
+    for m in range(F_n.shape[0]):
+        G = T2.T @ np.ascontiguousarray(F_n[m]) @ T1
+        n = np.sqrt((G * G).sum())
+        if np.isfinite(n) and n > 0:
+            F[m] = G / n
+            keep[m] = True
+    return F[keep], sid[keep]
+
+
 #: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the
 #: Sampson refinement is left to the final model).
 LO_FACTORS = (2.0, 1.0)
@@ -71,32 +106,25 @@ class FundamentalProblem:
         f = 0 if fixed1 is None else min(3, len(fixed1))  # DOF fixed by line points
         self.f1 = np.zeros((0, 2)) if fixed1 is None else apply_transform(data.T1, fixed1)
         self.f2 = np.zeros((0, 2)) if fixed2 is None else apply_transform(data.T2, fixed2)
+        self.f1, self.f2 = np.ascontiguousarray(self.f1), np.ascontiguousarray(self.f2)
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)
 
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
-        B = samples.shape[0]
-        x1 = np.concatenate(
-            [np.broadcast_to(self.f1, (B,) + self.f1.shape), self.data.x1[samples]], axis=1
-        )
-        x2 = np.concatenate(
-            [np.broadcast_to(self.f2, (B,) + self.f2.shape), self.data.x2[samples]], axis=1
-        )
-        if self.solver == "seven":
-            F_n, sid = seven_point(x1, x2)
-        else:
-            F_n, sid = eight_point(x1, x2), np.arange(B)
-        F = denormalize(F_n, self.data.T1, self.data.T2)
-        F /= np.linalg.norm(F.reshape(-1, 9), axis=1)[:, None, None]
-        return F, sid
+        return solve_samples_kernel(
+            self.f1, self.f2, self.data.x1, self.data.x2, samples, self.data.T1, self.data.T2,
+            self.solver == "seven",
+        )  # fmt: skip
 
     def distances(self, F: np.ndarray) -> np.ndarray:
         """(K, 3, 3) -> (K, N) symmetric epipolar distances in px."""
         return self.data.distances(F)
 
     def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self.scoring == "msac":  # compiled, no (K, N) distance matrix
+            return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
         return score_distances(self.distances(models), self.threshold, self.scoring)
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:

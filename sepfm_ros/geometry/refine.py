@@ -1,39 +1,106 @@
 """Least-squares refits on inliers and Sampson-error refinement (IRLS), rank 2 enforced.
 
 Used by local optimisation inside RANSAC (LO-RANSAC) and for the final model. All fits work on
-the design rows of :class:`Correspondences` (normalised coordinates, computed once), so a refit
-costs one weighted 9x9 Gram matrix and one eigen-decomposition.
+the normalised coordinates of :class:`Correspondences` (computed once); a refit costs one weighted
+9x9 Gram matrix and one eigen-decomposition, and the whole iterative refit is one compiled call.
 """
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
-    denormalize,
-    enforce_rank2,
-    normalize_fundamental,
+    denormalize_unit_kernel,
+    distances_kernel,
+    rank2_unit_kernel,
 )
+from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
 REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 
-def _solve_rows(rows: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-    """Rank-2 F_n (3, 3) minimising ||diag(w) rows vec(F)|| for (K, 9) rows, K >= 8."""
-    A = rows if weights is None else rows * weights[:, None]
-    _, vecs = np.linalg.eigh(A.T @ A)
-    return enforce_rank2(vecs[:, 0].reshape(3, 3))
+@numba.njit(cache=True)
+def _gram(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """9x9 Gram matrix sum_k w_k^2 r_k r_k^T of the design rows r = kron([x2, 1], [x1, 1]).
+
+    x1, x2: (N, 2) normalised coordinates; idx: (K,) rows used; w: (K,) weights.
+    """
+    G = np.zeros((9, 9))
+    r = np.empty(9)
+    for k in range(idx.shape[0]):
+        i = idx[k]
+        design_row(x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], r)
+        add_outer(G, r, w[k] * w[k])
+    symmetrize(G)
+    return G
 
 
-def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray) -> np.ndarray:
-    """1 / ||grad(x2^T F x1)|| per correspondence (the Sampson denominator), scaled to max 1."""
-    l2 = x1 @ F_n[:, :2].T + F_n[:, 2]  # (K, 3) = F x1
-    l1 = x2 @ F_n[:2, :] + F_n[2, :]  # (K, 3) = F^T x2
-    g = np.sqrt(l2[:, 0] ** 2 + l2[:, 1] ** 2 + l1[:, 0] ** 2 + l1[:, 1] ** 2)
-    w = 1.0 / np.maximum(g, 1e-12 * max(float(g.max()), 1e-300))
+@numba.njit(cache=True)
+def _solve_gram(G: np.ndarray) -> np.ndarray:
+    """Rank-2 unit-norm F_n (3, 3): the eigenvector of the smallest eigenvalue of G (9, 9)."""
+    _, vecs = np.linalg.eigh(G)
+    return rank2_unit_kernel(np.ascontiguousarray(vecs[:, 0]).reshape(3, 3))
+
+
+@numba.njit(cache=True)
+def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.ndarray):
+    """(K,) 1 / ||grad(x2^T F x1)|| (the Sampson denominator) of rows idx, scaled to max 1."""
+    K = idx.shape[0]
+    g = np.empty(K)
+    for k in range(K):
+        i = idx[k]
+        x, y, u, v = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1]
+        a2 = F_n[0, 0] * x + F_n[0, 1] * y + F_n[0, 2]
+        b2 = F_n[1, 0] * x + F_n[1, 1] * y + F_n[1, 2]
+        a1 = F_n[0, 0] * u + F_n[1, 0] * v + F_n[2, 0]
+        b1 = F_n[0, 1] * u + F_n[1, 1] * v + F_n[2, 1]
+        g[k] = np.sqrt(a2 * a2 + b2 * b2 + a1 * a1 + b1 * b1)
+    floor = 1e-12 * max(g.max(), 1e-300)
+    w = 1.0 / np.maximum(g, floor)
     return w / w.max()
+
+
+@numba.njit(cache=True)
+def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2) -> np.ndarray:
+    """Normalised eight-point least squares on rows idx (+ Sampson IRLS); F in px, unit norm."""
+    F_n = _solve_gram(_gram(x1, x2, idx, np.ones(idx.shape[0])))
+    for _ in range(irls_iterations):
+        F_n = _solve_gram(_gram(x1, x2, idx, _sampson_weights(F_n, x1, x2, idx)))
+    return denormalize_unit_kernel(F_n, T1, T2)
+
+
+@numba.njit(cache=True)
+def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_iterations):
+    """See :func:`iterative_refit`; returns (K, 3, 3) fitted models, K <= len(factors)."""
+    t2 = threshold * threshold
+    d = distances_kernel(F.reshape(1, 3, 3), X1, X2)[0]
+    best_cost = np.minimum(d * d, t2).sum()
+    out = np.empty((factors.shape[0], 3, 3))
+    n_out = 0
+    previous = np.zeros(d.shape[0], dtype=np.bool_)
+    have_previous = False
+    for j in range(factors.shape[0]):
+        inl = d < factors[j] * threshold
+        if inl.sum() < 8:
+            continue
+        if have_previous and np.array_equal(inl, previous):
+            if j == factors.shape[0] - 1:
+                break
+            continue
+        previous = inl
+        have_previous = True
+        G = _refit_kernel(x1, x2, np.flatnonzero(inl), irls_iterations, T1, T2)
+        dG = distances_kernel(G.reshape(1, 3, 3), X1, X2)[0]
+        c = np.minimum(dG * dG, t2).sum()
+        out[n_out] = G
+        n_out += 1
+        if c < best_cost:  # continue from the better model
+            best_cost = c
+            d = dG
+    return out[:n_out]
 
 
 def refit(data: Correspondences, inliers: np.ndarray, irls_iterations: int = 0) -> np.ndarray:
@@ -45,12 +112,8 @@ def refit(data: Correspondences, inliers: np.ndarray, irls_iterations: int = 0) 
     Returns:
         (3, 3) rank-2 F in pixels, unit Frobenius norm.
     """
-    rows = data.rows[inliers]
-    F_n = _solve_rows(rows)
-    x1, x2 = data.x1[inliers], data.x2[inliers]
-    for _ in range(irls_iterations):
-        F_n = _solve_rows(rows, _sampson_weights(F_n, x1, x2))
-    return normalize_fundamental(denormalize(F_n, data.T1, data.T2))
+    idx = np.flatnonzero(inliers)
+    return _refit_kernel(data.x1, data.x2, idx, int(irls_iterations), data.T1, data.T2)
 
 
 def fit_least_squares(pts1: np.ndarray, pts2: np.ndarray, irls_iterations: int = 0) -> np.ndarray:
@@ -79,24 +142,9 @@ def iterative_refit(
         Every model fitted on the way (each was scored against all matches; the caller picks
         the best by its own scoring); empty when no step had 8 inliers.
     """
-    t2 = threshold * threshold
-    d = data.distances(F)
-    best_cost = float(np.minimum(d * d, t2).sum())
-    fitted: list[np.ndarray] = []
-    previous = None
-    for factor in factors:
-        inl = d < factor * threshold
-        if np.count_nonzero(inl) < 8:
-            continue
-        if previous is not None and np.array_equal(inl, previous):
-            if factor == factors[-1]:
-                break
-            continue
-        previous = inl
-        G = refit(data, inl, irls_iterations)
-        dG = data.distances(G)
-        c = float(np.minimum(dG * dG, t2).sum())
-        fitted.append(G)
-        if c < best_cost:  # continue from the better model
-            best_cost, d = c, dG
-    return fitted
+    fitted = _iterative_refit_kernel(
+        np.ascontiguousarray(F, dtype=np.float64), data.X1, data.X2, data.x1, data.x2,
+        data.T1, data.T2, float(threshold), np.asarray(factors, dtype=np.float64),
+        int(irls_iterations),
+    )  # fmt: skip
+    return list(fitted)

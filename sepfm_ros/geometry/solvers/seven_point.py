@@ -1,14 +1,82 @@
-"""Seven-point algorithm, batched: each real root of the cubic det(F) = 0 is one model."""
+"""Seven-point algorithm, batched and compiled: each real root of det(F) = 0 is one model."""
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
-from sepfm_ros.geometry.solvers.design import epipolar_rows
+from sepfm_ros.geometry.solvers.design import design_row
 
 # det(F2 + s (F1 - F2)) is a cubic in s; sample it at these s and solve for the coefficients.
 _S = np.array([0.0, 1.0, -1.0, 2.0])
 _VANDER_INV = np.linalg.inv(np.vander(_S, 4))  # rows: s^3, s^2, s, 1
+
+
+@numba.njit(cache=True)
+def _det3(A: np.ndarray) -> float:
+    return (
+        A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
+        - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
+        + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0])
+    )
+
+
+@numba.njit(cache=True)
+def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> int:
+    """Real-root models of one sample's (K, 9) design rows into out (3, 3, 3); returns how many."""
+    _, _, Vt = np.linalg.svd(A)  # full 9x9 Vt: the last two rows span the (LS) null space
+    F1 = np.ascontiguousarray(Vt[8]).reshape(3, 3)
+    F2 = np.ascontiguousarray(Vt[7]).reshape(3, 3)
+    D = F1 - F2
+    dets = np.empty(4)
+    for j in range(4):
+        dets[j] = _det3(F2 + _S[j] * D)
+    coeffs = vander_inv @ dets  # c3, c2, c1, c0
+    scale = np.abs(coeffs).max()
+    if scale == 0:
+        scale = 1.0
+    c3 = coeffs[0]
+    if abs(c3) < 1e-12 * scale:  # a root at infinity (F = D): keep the cubic finite
+        c3 = (1e-12 if c3 >= 0 else -1e-12) * scale
+    comp = np.zeros((3, 3))
+    comp[0, 0] = -coeffs[1] / c3
+    comp[0, 1] = -coeffs[2] / c3
+    comp[0, 2] = -coeffs[3] / c3
+    comp[1, 0] = 1.0
+    comp[2, 1] = 1.0
+    roots = np.linalg.eigvals(comp.astype(np.complex128))
+    n = 0
+    for r in roots:
+        if abs(r.imag) <= 1e-8 * (1.0 + abs(r.real)):
+            F = F2 + r.real * D
+            norm = np.sqrt((F * F).sum())
+            if np.isfinite(norm) and norm > 0:
+                out[n] = F / norm
+                n += 1
+    return n
+
+
+@numba.njit(cache=True)
+def seven_point_kernel(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(M, K, 2) normalised samples -> (F (<= 3M, 3, 3) unit norm, sample index of each)."""
+    M, K = x1.shape[0], x1.shape[1]
+    F = np.empty((3 * M, 3, 3))
+    sid = np.empty(3 * M, dtype=np.int64)
+    buf = np.empty((3, 3, 3))
+    A = np.empty((K, 9))
+    vander_inv = _VANDER_INV
+    n = 0
+    for m in range(M):
+        for k in range(K):
+            design_row(x1[m, k, 0], x1[m, k, 1], x2[m, k, 0], x2[m, k, 1], A[k])
+        if not np.isfinite(A).all():
+            continue
+        r = _seven_point_one(A, vander_inv, buf)
+        for j in range(r):
+            F[n] = buf[j]
+            sid[n] = m
+            n += 1
+    return F[:n], sid[:n]
 
 
 def seven_point(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -26,32 +94,6 @@ def seven_point(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     """
     if x1.ndim != 3 or x1.shape[1] < 7:
         raise ValueError(f"seven_point expects (M, K >= 7, 2) inputs, got {x1.shape}")
-    M, K = x1.shape[:2]
-    A = epipolar_rows(x1, x2)  # (M, K, 9)
-    if K < 9:
-        A = np.concatenate([A, np.zeros((M, 9 - K, 9))], axis=1)  # square up for a full SVD
-    _, _, Vt = np.linalg.svd(A)
-    F1 = Vt[:, -1].reshape(M, 3, 3)
-    F2 = Vt[:, -2].reshape(M, 3, 3)
-    D = F1 - F2
-    dets = np.linalg.det(F2[:, None] + _S[None, :, None, None] * D[:, None])  # (M, 4)
-    coeffs = dets @ _VANDER_INV.T  # (M, 4): c3, c2, c1, c0
-    c3 = coeffs[:, 0]
-    scale = np.max(np.abs(coeffs), axis=1)
-    scale = np.where(scale == 0, 1.0, scale)
-    # A vanishing leading coefficient means one root at infinity (F = D); keep it finite.
-    tiny = np.abs(c3) < 1e-12 * scale
-    c3 = np.where(tiny, np.where(c3 >= 0, 1e-12, -1e-12) * scale, c3)
-    comp = np.zeros((M, 3, 3))
-    comp[:, 0, :] = -coeffs[:, 1:] / c3[:, None]
-    comp[:, 1, 0] = 1.0
-    comp[:, 2, 1] = 1.0
-    roots = np.linalg.eigvals(comp)  # (M, 3)
-    real = np.abs(roots.imag) <= 1e-8 * (1.0 + np.abs(roots.real))
-    sample, which = np.nonzero(real)
-    s = roots.real[sample, which]
-    F = F2[sample] + s[:, None, None] * D[sample]
-    norms = np.linalg.norm(F.reshape(-1, 9), axis=1)
-    good = np.isfinite(norms) & (norms > 0)
-    F = F[good] / norms[good, None, None]
-    return F, sample[good]
+    return seven_point_kernel(
+        np.ascontiguousarray(x1, dtype=np.float64), np.ascontiguousarray(x2, dtype=np.float64)
+    )

@@ -126,7 +126,7 @@ def test_duplicate_correspondences_are_removed_best_first():
 
 def _reference_matches(pts_a, desc_a, pts_b, desc_b, features, ratio):
     """Lowe-ratio matches from OpenCV's BFMatcher.knnMatch, one Python loop (the plain way)."""
-    norm = cv2.NORM_HAMMING if features == "orb" else cv2.NORM_L2
+    norm = cv2.NORM_L2 if features == "sift" else cv2.NORM_HAMMING
     rows = []
     for m, n in cv2.BFMatcher(norm).knnMatch(desc_a, desc_b, k=2):
         r = m.distance / n.distance if n.distance > 0 else (0.0 if m.distance == 0 else 1.0)
@@ -146,7 +146,7 @@ def _reference_matches(pts_a, desc_a, pts_b, desc_b, features, ratio):
     return out
 
 
-@pytest.mark.parametrize("features", ["orb", "sift"])
+@pytest.mark.parametrize("features", ["orb", "sift", "akaze"])
 def test_vectorised_matching_equals_opencv_knn_matcher(shared_data, features):
     from sepfm_ros.pipeline.features import detect, make_detector, match_descriptors
 
@@ -162,6 +162,22 @@ def test_vectorised_matching_equals_opencv_knn_matcher(shared_data, features):
             np.testing.assert_array_equal(m.ratio, [r for r, _, _ in ref])
             np.testing.assert_array_equal(m.pts_a, pa[[ia for _, ia, _ in ref]])
             np.testing.assert_array_equal(m.pts_b, pb[[ib for _, _, ib in ref]])
+
+
+@pytest.mark.parametrize("n_bytes", [1, 3, 32, 61])
+def test_hamming_two_nearest_equals_opencv_knn_with_ties(n_bytes):
+    """Few bits (many equal distances) and widths that are not a multiple of 8 bytes (AKAZE)."""
+    from sepfm_ros.pipeline.features import _two_nearest_binary
+
+    rng = np.random.default_rng(n_bytes)
+    desc_a = rng.integers(0, 256, (300, n_bytes), dtype=np.uint8)
+    desc_b = rng.integers(0, 256, (200, n_bytes), dtype=np.uint8)
+    i1, d1, i2, d2 = _two_nearest_binary(desc_a, desc_b)
+    knn = cv2.BFMatcher(cv2.NORM_HAMMING).knnMatch(desc_a, desc_b, k=2)
+    np.testing.assert_array_equal(i1, [m.trainIdx for m, _ in knn])
+    np.testing.assert_array_equal(d1, [m.distance for m, _ in knn])
+    np.testing.assert_array_equal(i2, [n.trainIdx for _, n in knn])
+    np.testing.assert_array_equal(d2, [n.distance for _, n in knn])
 
 
 def test_match_and_estimate_on_two_threads_equal_process(shared_data):

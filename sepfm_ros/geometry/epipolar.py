@@ -109,22 +109,60 @@ def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
     """(3, 3) -> closest rank-2 matrix (Frobenius), scaled to unit norm."""
     U, s, Vt = np.linalg.svd(F)
     G = np.zeros((3, 3))
+    n = 0.0
     for i in range(3):
         for j in range(3):
             G[i, j] = U[i, 0] * s[0] * Vt[0, j] + U[i, 1] * s[1] * Vt[1, j]
-    n = np.sqrt((G * G).sum())
-    return G / n if n > 0 else G
+            n += G[i, j] * G[i, j]
+    if n > 0:
+        n = np.sqrt(n)
+        for i in range(3):
+            for j in range(3):
+                G[i, j] /= n
+    return G
+
+
+@numba.njit(cache=True)
+def denormalize_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray, out: np.ndarray) -> bool:
+    """out (3, 3) = T2^T F_n T1 at unit Frobenius norm; False (out undefined) if not finite/zero."""
+    tmp = np.zeros((3, 3))
+    for i in range(3):
+        for j in range(3):
+            for k in range(3):
+                tmp[i, j] += F_n[i, k] * T1[k, j]
+    n = 0.0
+    for i in range(3):
+        for j in range(3):
+            v = 0.0
+            for k in range(3):
+                v += T2[k, i] * tmp[k, j]
+            out[i, j] = v
+            n += v * v
+    if not (np.isfinite(n) and n > 0):
+        return False
+    n = np.sqrt(n)
+    for i in range(3):
+        for j in range(3):
+            out[i, j] /= n
+    return True
 
 
 @numba.njit(cache=True)
 def denormalize_unit_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
     """T2^T F_n T1 (3, 3) at unit Frobenius norm, largest-magnitude entry positive."""
-    F = T2.T @ F_n @ T1
-    k = np.argmax(np.abs(F.ravel()))
-    n = np.sqrt((F * F).sum())
-    if n == 0:
+    F = np.zeros((3, 3))
+    if not denormalize_kernel(F_n, T1, T2, F):
         return F
-    return F / n if F.ravel()[k] >= 0 else -F / n
+    big = 0.0
+    for i in range(3):
+        for j in range(3):
+            if abs(F[i, j]) > abs(big):
+                big = F[i, j]
+    if big < 0:
+        for i in range(3):
+            for j in range(3):
+                F[i, j] = -F[i, j]
+    return F
 
 
 def symmetric_epipolar_distance_h(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:

@@ -11,7 +11,7 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.epipolar import apply_transform, msac_kernel
+from sepfm_ros.geometry.epipolar import apply_transform, denormalize_kernel, msac_kernel
 from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
@@ -32,25 +32,23 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven):
     y1 = np.empty((B, f + k, 2))
     y2 = np.empty((B, f + k, 2))
     for b in range(B):
-        y1[b, :f] = f1
-        y2[b, :f] = f2
-        for j in range(k):
-            y1[b, f + j] = x1[samples[b, j]]
-            y2[b, f + j] = x2[samples[b, j]]
+        for j in range(f + k):
+            for c in range(2):
+                y1[b, j, c] = f1[j, c] if j < f else x1[samples[b, j - f], c]
+                y2[b, j, c] = f2[j, c] if j < f else x2[samples[b, j - f], c]
     if seven:
         F_n, sid = seven_point_kernel(y1, y2)
     else:
         F_n = eight_point_kernel(y1, y2, np.ones((B, f + k)))
         sid = np.arange(B)
     F = np.empty_like(F_n)
-    keep = np.zeros(F_n.shape[0], dtype=np.bool_)
+    out_sid = np.empty_like(sid)
+    n_out = 0
     for m in range(F_n.shape[0]):
-        G = T2.T @ np.ascontiguousarray(F_n[m]) @ T1
-        n = np.sqrt((G * G).sum())
-        if np.isfinite(n) and n > 0:
-            F[m] = G / n
-            keep[m] = True
-    return F[keep], sid[keep]
+        if denormalize_kernel(F_n[m], T1, T2, F[n_out]):
+            out_sid[n_out] = sid[m]
+            n_out += 1
+    return F[:n_out], out_sid[:n_out]
 
 
 #: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the

@@ -42,7 +42,10 @@ def _gram(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.
 def _solve_gram(G: np.ndarray) -> np.ndarray:
     """Rank-2 unit-norm F_n (3, 3): the eigenvector of the smallest eigenvalue of G (9, 9)."""
     _, vecs = np.linalg.eigh(G)
-    return rank2_unit_kernel(np.ascontiguousarray(vecs[:, 0]).reshape(3, 3))
+    F = np.empty((3, 3))
+    for i in range(9):
+        F[i // 3, i % 3] = vecs[i, 0]
+    return rank2_unit_kernel(F)
 
 
 @numba.njit(cache=True)
@@ -95,7 +98,9 @@ def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_
         G = _refit_kernel(x1, x2, np.flatnonzero(inl), irls_iterations, T1, T2)
         dG = distances_kernel(G.reshape(1, 3, 3), X1, X2)[0]
         c = np.minimum(dG * dG, t2).sum()
-        out[n_out] = G
+        for a in range(3):
+            for b in range(3):
+                out[n_out, a, b] = G[a, b]
         n_out += 1
         if c < best_cost:  # continue from the better model
             best_cost = c

@@ -25,10 +25,16 @@ def eight_point_kernel(x1: np.ndarray, x2: np.ndarray, w: np.ndarray) -> np.ndar
             add_outer(G, r, w[m, k] * w[m, k])
         symmetrize(G)
         if not np.isfinite(G).all():
-            out[m] = np.nan
+            for i in range(9):
+                out[m, i // 3, i % 3] = np.nan
             continue
         _, vecs = np.linalg.eigh(G)
-        out[m] = rank2_unit_kernel(np.ascontiguousarray(vecs[:, 0]).reshape(3, 3))
+        F = np.empty((3, 3))
+        for i in range(9):
+            F[i // 3, i % 3] = vecs[i, 0]
+        F = rank2_unit_kernel(F)
+        for i in range(9):
+            out[m, i // 3, i % 3] = F[i // 3, i % 3]
     return out
 
 

@@ -13,45 +13,61 @@ _VANDER_INV = np.linalg.inv(np.vander(_S, 4))  # rows: s^3, s^2, s, 1
 
 
 @numba.njit(cache=True)
-def _det3(A: np.ndarray) -> float:
+def _det_pencil(f2: np.ndarray, d: np.ndarray, s: float) -> float:
+    """det(F2 + s D) of row-major (9,) F2 and D."""
+    a = np.empty(9)
+    for i in range(9):
+        a[i] = f2[i] + s * d[i]
     return (
-        A[0, 0] * (A[1, 1] * A[2, 2] - A[1, 2] * A[2, 1])
-        - A[0, 1] * (A[1, 0] * A[2, 2] - A[1, 2] * A[2, 0])
-        + A[0, 2] * (A[1, 0] * A[2, 1] - A[1, 1] * A[2, 0])
+        a[0] * (a[4] * a[8] - a[5] * a[7])
+        - a[1] * (a[3] * a[8] - a[5] * a[6])
+        + a[2] * (a[3] * a[7] - a[4] * a[6])
     )
 
 
 @numba.njit(cache=True)
 def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> int:
-    """Real-root models of one sample's (K, 9) design rows into out (3, 3, 3); returns how many."""
+    """Real-root models of one sample's (K, 9) design rows into out (3, 9); returns how many.
+
+    Models are row-major (9,) at unit norm.
+    """
     _, _, Vt = np.linalg.svd(A)  # full 9x9 Vt: the last two rows span the (LS) null space
-    F1 = np.ascontiguousarray(Vt[8]).reshape(3, 3)
-    F2 = np.ascontiguousarray(Vt[7]).reshape(3, 3)
-    D = F1 - F2
+    f2 = np.empty(9)
+    d = np.empty(9)
+    for i in range(9):
+        f2[i] = Vt[7, i]
+        d[i] = Vt[8, i] - Vt[7, i]
     dets = np.empty(4)
     for j in range(4):
-        dets[j] = _det3(F2 + _S[j] * D)
-    coeffs = vander_inv @ dets  # c3, c2, c1, c0
-    scale = np.abs(coeffs).max()
+        dets[j] = _det_pencil(f2, d, _S[j])
+    coeffs = np.zeros(4)  # c3, c2, c1, c0
+    scale = 0.0
+    for i in range(4):
+        for j in range(4):
+            coeffs[i] += vander_inv[i, j] * dets[j]
+        scale = max(scale, abs(coeffs[i]))
     if scale == 0:
         scale = 1.0
     c3 = coeffs[0]
     if abs(c3) < 1e-12 * scale:  # a root at infinity (F = D): keep the cubic finite
         c3 = (1e-12 if c3 >= 0 else -1e-12) * scale
-    comp = np.zeros((3, 3))
-    comp[0, 0] = -coeffs[1] / c3
-    comp[0, 1] = -coeffs[2] / c3
-    comp[0, 2] = -coeffs[3] / c3
+    comp = np.zeros((3, 3), dtype=np.complex128)
+    for j in range(3):
+        comp[0, j] = -coeffs[j + 1] / c3
     comp[1, 0] = 1.0
     comp[2, 1] = 1.0
-    roots = np.linalg.eigvals(comp.astype(np.complex128))
+    roots = np.linalg.eigvals(comp)
     n = 0
     for r in roots:
         if abs(r.imag) <= 1e-8 * (1.0 + abs(r.real)):
-            F = F2 + r.real * D
-            norm = np.sqrt((F * F).sum())
+            norm = 0.0
+            for i in range(9):
+                out[n, i] = f2[i] + r.real * d[i]
+                norm += out[n, i] * out[n, i]
+            norm = np.sqrt(norm)
             if np.isfinite(norm) and norm > 0:
-                out[n] = F / norm
+                for i in range(9):
+                    out[n, i] /= norm
                 n += 1
     return n
 
@@ -60,23 +76,28 @@ def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> 
 def seven_point_kernel(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(M, K, 2) normalised samples -> (F (<= 3M, 3, 3) unit norm, sample index of each)."""
     M, K = x1.shape[0], x1.shape[1]
-    F = np.empty((3 * M, 3, 3))
+    F = np.empty((3 * M, 9))
     sid = np.empty(3 * M, dtype=np.int64)
-    buf = np.empty((3, 3, 3))
+    buf = np.empty((3, 9))
     A = np.empty((K, 9))
     vander_inv = _VANDER_INV
     n = 0
     for m in range(M):
         for k in range(K):
             design_row(x1[m, k, 0], x1[m, k, 1], x2[m, k, 0], x2[m, k, 1], A[k])
-        if not np.isfinite(A).all():
+        finite = True
+        for k in range(K):
+            for i in range(9):
+                finite = finite and np.isfinite(A[k, i])
+        if not finite:
             continue
         r = _seven_point_one(A, vander_inv, buf)
         for j in range(r):
-            F[n] = buf[j]
+            for i in range(9):
+                F[n, i] = buf[j, i]
             sid[n] = m
             n += 1
-    return F[:n], sid[:n]
+    return F[:n].reshape(n, 3, 3), sid[:n]
 
 
 def seven_point(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -2,6 +2,9 @@
 
 - ``shared_data``: the folder ``../shared/data`` beside the repository (real images with GT F).
   Skips when it is missing, unless ``SEPFM_REQUIRE_SHARED=1`` (CI), where it fails instead.
+- ``compiled_kernels`` (autouse): the estimator's numba kernels compiled (or loaded from the
+  on-disk cache) once, before any test, so node subprocesses started by tests load a warm cache
+  instead of each compiling for tens of seconds.
 - ``ros_domain_id``: one random ROS_DOMAIN_ID (1..200) per test session, set in ``os.environ``
   so node subprocesses and the test process's own rclpy share it and no other run.
 """
@@ -27,6 +30,14 @@ def shared_data() -> Path:
             pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
         pytest.skip(message)
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session", autouse=True)
+def compiled_kernels() -> float:
+    """Compile or load the estimator's kernels once per session; returns the seconds spent."""
+    from sepfm_ros.geometry.compiled import warm_up
+
+    return warm_up()
 
 
 @pytest.fixture(scope="session")

@@ -1,0 +1,27 @@
+"""Ahead-of-use compilation of the estimator's numba kernels.
+
+The kernels compile on first use (seconds to tens of seconds on a fresh install) and are cached
+on disk beside their modules, so later processes only load them (well under a second). A
+long-running process calls :func:`warm_up` once at start so its first frame is not the one that
+pays; tests call it once per session so node subprocesses find a warm cache.
+"""
+
+from __future__ import annotations
+
+import time
+
+from sepfm_ros.geometry.estimator import METHODS, estimate_fundamental
+from sepfm_ros.geometry.synthetic import make_pair
+
+
+def warm_up() -> float:
+    """Run every method once on a small synthetic pair (compiling or loading each kernel).
+
+    Returns:
+        Seconds spent.
+    """
+    t0 = time.perf_counter()
+    pair = make_pair(n_inliers=60, n_outliers=20, n_lines=2, points_per_line=10, noise=0.3, seed=0)
+    for method in METHODS:
+        estimate_fundamental(pair.pts1, pair.pts2, pair.image_size, method=method, seed=0)
+    return time.perf_counter() - t0

@@ -112,3 +112,26 @@ def test_ransac_trials_paper_values():
         ransac_trials(0, 0.5)
     with pytest.raises(ValueError):
         ransac_trials(7, 1.0)
+
+
+def test_draw_samples_distinct_uniform_and_seeded():
+    from collections import Counter
+
+    from sepfm_ros.geometry.ransac import draw_samples
+
+    pool = np.arange(100, 110)  # samples are entries of the pool, not positions
+    s = draw_samples(np.random.default_rng(5), pool, 3, 60000)
+    assert s.shape == (60000, 3) and set(np.unique(s)) == set(pool.tolist())
+    assert all(len(set(row)) == 3 for row in s.tolist())
+    subsets = Counter(tuple(sorted(row)) for row in s.tolist())
+    assert len(subsets) == 120  # every 3-subset of 10 occurs ...
+    counts = np.array(list(subsets.values()))
+    expected = 60000 / 120
+    chi2 = float(((counts - expected) ** 2 / expected).sum())
+    assert chi2 < 200, chi2  # ... about equally often (119 dof: 99.9 % quantile ~ 170)
+    # the same seed gives the same samples; a pool of exactly k is a permutation
+    again = draw_samples(np.random.default_rng(5), pool, 3, 60000)
+    assert np.array_equal(s, again)
+    assert sorted(draw_samples(np.random.default_rng(1), pool, 10, 1)[0]) == pool.tolist()
+    with pytest.raises(ValueError):
+        draw_samples(np.random.default_rng(1), pool, 11, 1)

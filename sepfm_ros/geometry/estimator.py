@@ -21,7 +21,7 @@ import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.degeneracy import plane_and_parallax
-from sepfm_ros.geometry.epipolar import normalize_fundamental, symmetric_epipolar_distance
+from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
@@ -106,8 +106,8 @@ def _degeneracy(p1: np.ndarray, p2: np.ndarray, threshold: float) -> str | None:
     """A reason why no F can be determined from these points, or None."""
     for name, p in (("image 1", p1), ("image 2", p2)):
         c = p - p.mean(axis=0)
-        s = np.linalg.svd(c, compute_uv=False)
-        if s[0] == 0 or s[1] <= 1e-6 * s[0]:
+        ev = np.linalg.eigvalsh(c.T @ c)  # squared singular values of c, ascending
+        if ev[1] <= 0 or ev[0] <= 1e-12 * ev[1]:
             return f"degenerate: all points on one line in {name}"
     if np.median(np.linalg.norm(p2 - p1, axis=1)) < 0.1 * threshold:
         return "degenerate: no motion (points do not move between the images)"
@@ -226,7 +226,9 @@ def estimate_fundamental(
                 stage1_s[0] += time.perf_counter() - t
                 if fit is None:
                     continue
-                pool = np.setdiff1d(np.arange(n), pair.support)
+                off_pair = np.ones(n, dtype=bool)
+                off_pair[pair.support] = False
+                pool = np.flatnonzero(off_pair)
                 if len(pool) < k_stage2:
                     continue
                 f1, f2 = _triples(fit, p1, p2, opt["triple"])
@@ -278,7 +280,7 @@ def estimate_fundamental(
         est.stage2_hypotheses += check.candidates
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
-    est.inliers = symmetric_epipolar_distance(F, p1, p2) < threshold
+    est.inliers = data.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
     k = est.num_inliers
     if k < 8:
@@ -298,7 +300,6 @@ def _final_model(
     MSAC cost at ``threshold`` (see :func:`iterative_refit`).
     """
     fitted = iterative_refit(F, data, threshold, irls_iterations=2 if refine else 0)
-    candidates = np.stack([F, *fitted])
-    d = symmetric_epipolar_distance(candidates, data.pts1, data.pts2)
-    cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
+    candidates = np.ascontiguousarray(np.stack([F, *fitted]))
+    cost, _ = msac_kernel(candidates, data.X1, data.X2, threshold)
     return normalize_fundamental(candidates[int(np.argmin(cost))]), len(fitted)

@@ -7,6 +7,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+import numba
 import numpy as np
 
 
@@ -98,22 +99,33 @@ class RansacResult:
     converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
 
 
+@numba.njit(cache=True)
+def _floyd_samples(u: np.ndarray, P: int) -> np.ndarray:
+    """(b, k) distinct indices in [0, P) per row from (b, k) uniforms in [0, 1) (Floyd's method).
+
+    Row i is a uniformly random k-subset of range(P): for j = P - k .. P - 1 take t uniform in
+    [0, j]; keep t unless already taken, else keep j.
+    """
+    b, k = u.shape
+    out = np.empty((b, k), dtype=np.int64)
+    for i in range(b):
+        for m in range(k):
+            j = P - k + m
+            t = min(int(u[i, m] * (j + 1)), j)
+            for q in range(m):
+                if out[i, q] == t:
+                    t = j
+                    break
+            out[i, m] = t
+    return out
+
+
 def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> np.ndarray:
     """(b, k) samples of k distinct entries of ``pool`` each, uniformly at random."""
     P = pool.shape[0]
     if P < k:
         raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
-    out = np.empty((0, k), dtype=np.int64)
-    while out.shape[0] < b:
-        m = int((b - out.shape[0]) * 1.3) + 4
-        if P < 4 * k:  # small pools: exact sampling without replacement
-            idx = np.argsort(rng.random((m, P)), axis=1)[:, :k]
-        else:
-            idx = rng.integers(0, P, size=(m, k))
-            srt = np.sort(idx, axis=1)
-            idx = idx[np.all(srt[:, 1:] != srt[:, :-1], axis=1)]
-        out = np.concatenate([out, idx])
-    return pool[out[:b]]
+    return pool[_floyd_samples(rng.random((b, k)), P)]
 
 
 def _trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:

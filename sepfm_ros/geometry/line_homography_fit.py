@@ -10,16 +10,15 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
-from sepfm_ros.geometry.fundamental_problem import score_distances
 from sepfm_ros.geometry.line_pairs import LinePair, control_points, line_parameter
-from sepfm_ros.geometry.ransac import run_ransac
 from sepfm_ros.geometry.solvers.line_homography import (
-    inverse,
-    line_homography_3pt,
-    line_homography_lsq,
+    line_homography_3pt_kernel,
+    line_homography_lsq_kernel,
     transfer,
+    transfer_kernel,
 )
 
 
@@ -49,46 +48,150 @@ class LineHomographyFit:
         return p1, p2
 
 
-class LineHomographyProblem:
-    """RANSAC arm for H_e: data are line parameters t1, t2 of the K line correspondences."""
+@numba.njit(cache=True)
+def _trials_needed(count: int, n: int, confidence: float, cap: int) -> int:
+    """F(3, r) for inlier ratio count / n, capped (as ransac.ransac_trials with max_trials)."""
+    w = min(1.0, count / n) if n > 0 else 0.0
+    if w <= 0.0:
+        return cap
+    p = w**3
+    if p >= 1.0:
+        return 1
+    denom = np.log1p(-p)
+    if denom == 0.0:
+        return cap
+    return max(1, min(cap, int(np.ceil(np.log1p(-confidence) / denom))))
 
-    sample_size = 3
 
-    def __init__(self, t1: np.ndarray, t2: np.ndarray, len1: float, len2: float, threshold: float):
-        # len1, len2: control-segment lengths in working-resolution px (t -> px along the line)
-        self.t1, self.t2 = t1, t2
-        self.len1, self.len2 = len1, len2
-        self.threshold = threshold
-        self.n = len(t1)
-        self.pool = np.arange(self.n)
+@numba.njit(cache=True)
+def transfer_errors(
+    h: np.ndarray, t1: np.ndarray, t2: np.ndarray, len1: float, len2: float, out: np.ndarray
+) -> None:
+    """Symmetric transfer error along the lines of H_e h (4,) into out (K,), working px.
 
-    def errors(self, H: np.ndarray) -> np.ndarray:
-        """(M, 2, 2) -> (M, K) symmetric transfer error along the lines, working px."""
-        fwd = np.abs(transfer(H, self.t1) - self.t2) * self.len2
-        bwd = np.abs(transfer(inverse(H), self.t2) - self.t1) * self.len1
+    Mean of |H_e(t1) - t2| * len2 and |H_e^-1(t2) - t1| * len1 (inf where a point maps to
+    infinity); len1, len2 convert t to px (control-segment lengths).
+    """
+    a, b, c, d = h[0], h[1], h[2], h[3]
+    for i in range(len(t1)):
+        fwd = abs(transfer_kernel(a, b, c, d, t1[i]) - t2[i]) * len2
+        bwd = abs(transfer_kernel(d, -b, -c, a, t2[i]) - t1[i]) * len1
         e = 0.5 * (fwd + bwd)
-        return np.where(np.isfinite(e), e, np.inf)
+        out[i] = e if np.isfinite(e) else np.inf
 
-    def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        t1, t2 = self.t1[samples], self.t2[samples]
-        ab1 = np.stack([1.0 - t1, t1], axis=-1)
-        ab2 = np.stack([1.0 - t2, t2], axis=-1)
-        H = line_homography_3pt(ab1, ab2)
-        # a rank-deficient H_e maps the whole line to one point: not a line homography
-        det = np.abs(np.linalg.det(H))
-        ok = det > 1e-9
-        return H[ok], np.flatnonzero(ok)
 
-    def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return score_distances(self.errors(models), self.threshold, "msac")
+@numba.njit(cache=True)
+def _msac(err: np.ndarray, threshold: float) -> tuple[float, int]:
+    """Truncated quadratic cost sum(min(e^2, T^2)) and inlier count (e < T) of (K,) errors."""
+    t2 = threshold * threshold
+    cost = 0.0
+    count = 0
+    for e in err:
+        cost += min(e * e, t2)
+        if e < threshold:
+            count += 1
+    return cost, count
 
-    def local_optimize(self, model: np.ndarray) -> np.ndarray:
-        inl = self.errors(model[None])[0] < self.threshold
-        if np.count_nonzero(inl) < 4:
-            return np.zeros((0, 2, 2))
-        t1, t2 = self.t1[inl], self.t2[inl]
-        H = line_homography_lsq(np.stack([1 - t1, t1], -1), np.stack([1 - t2, t2], -1))
-        return H[None]
+
+@numba.njit(cache=True)
+def stage1_ransac(
+    t1: np.ndarray,
+    t2: np.ndarray,
+    len1: float,
+    len2: float,
+    threshold: float,
+    confidence: float,
+    uniforms: np.ndarray,
+    batch: int = 64,
+) -> tuple[np.ndarray, bool, int]:
+    """RANSAC for H_e on K line correspondences, compiled: (h (4,), found, hypotheses).
+
+    The loop of :func:`sepfm_ros.geometry.ransac.run_ransac` for one arm: samples of 3 in
+    batches growing 1, 1, 2, 4, ... (at most ``batch``), minimal solve, MSAC score at
+    ``threshold``, local optimisation (least squares on the inliers, at least 4) of every
+    minimal-sample model that beats the best minimal-sample model so far, adaptive stopping
+    after F(3, r) samples.
+
+    Args:
+        t1, t2: (K,) line parameters of the correspondences (K >= 3).
+        len1, len2: control-segment lengths, working px (t -> px along the lines).
+        threshold: T1, working px. confidence: p of F(3, r).
+        uniforms: (S, 3) uniform [0, 1) numbers from the caller's generator; S = max samples.
+            Row s picks sample s (3 distinct correspondences).
+    """
+    K = len(t1)
+    cap = uniforms.shape[0]
+    best = np.zeros(4)
+    best_cost = np.inf
+    best_count = -1
+    best_raw_cost = np.inf
+    hyps = 0
+    samples = 0
+    h = np.empty(4)
+    s1 = np.empty(3)
+    s2 = np.empty(3)
+    err = np.empty(K)
+    bh = np.empty(4)
+    if K < 3 or cap == 0:
+        return best, False, 0
+    while True:
+        need = max(_trials_needed(max(best_count, 0), K, confidence, cap), 1)
+        b = min(max(need - samples, 1), min(batch, max(1, samples)))
+        b = min(b, cap - samples)
+        if b > 0:
+            b_cost = np.inf
+            b_count = 0
+            for s in range(samples, samples + b):
+                u = uniforms[s]
+                i0 = min(int(u[0] * K), K - 1)
+                i1 = min(int(u[1] * (K - 1)), K - 2)
+                if i1 >= i0:
+                    i1 += 1
+                i2 = min(int(u[2] * (K - 2)), K - 3)
+                lo, hi = min(i0, i1), max(i0, i1)
+                if i2 >= lo:
+                    i2 += 1
+                if i2 >= hi:
+                    i2 += 1
+                s1[0], s1[1], s1[2] = t1[i0], t1[i1], t1[i2]
+                s2[0], s2[1], s2[2] = t2[i0], t2[i1], t2[i2]
+                line_homography_3pt_kernel(s1, s2, h)
+                # a rank-deficient H_e maps the whole line to one point: not a line homography
+                if not abs(h[0] * h[3] - h[1] * h[2]) > 1e-9:
+                    continue
+                transfer_errors(h, t1, t2, len1, len2, err)
+                cost, count = _msac(err, threshold)
+                hyps += 1
+                if cost < b_cost:
+                    b_cost = cost
+                    b_count = count
+                    bh[:] = h
+            samples += b
+            if b_cost < best_cost:
+                best[:] = bh
+                best_cost, best_count = b_cost, b_count
+            if b_cost < best_raw_cost:
+                best_raw_cost = b_cost
+                # local optimisation: least squares on the inliers of the batch's best model
+                transfer_errors(bh, t1, t2, len1, len2, err)
+                inl = err < threshold
+                if np.count_nonzero(inl) >= 4:
+                    lh = line_homography_lsq_kernel(t1, t2, inl)
+                    transfer_errors(lh, t1, t2, len1, len2, err)
+                    cost, count = _msac(err, threshold)
+                    hyps += 1
+                    if cost < best_cost:
+                        best[:] = lh
+                        best_cost, best_count = cost, count
+        if best_count >= 0 and samples >= _trials_needed(best_count, K, confidence, cap):
+            break
+        if samples >= cap:
+            break
+    return best, best_count >= 0, hyps
+
+
+def _as_matrix(h: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(h, dtype=np.float64).reshape(2, 2).copy()
 
 
 def fit_line_homography(
@@ -117,21 +220,21 @@ def fit_line_homography(
     hyps = 0
     if len(support) < min_inliers:
         return None, 0
+    len1 = float(np.linalg.norm(ctrl1[1] - ctrl1[0])) * scale1
+    err = np.empty(len(support))
     for orientation, ctrl2 in ((1, base2), (2, base2[::-1].copy())):
         t2 = line_parameter(pts2[support], ctrl2)
-        len1 = float(np.linalg.norm(ctrl1[1] - ctrl1[0])) * scale1
         len2 = float(np.linalg.norm(ctrl2[1] - ctrl2[0])) * scale2
-        prob = LineHomographyProblem(t1, t2, len1, len2, threshold)
-        res = run_ransac(
-            [prob], rng, confidence=confidence, max_samples=max_samples, max_extra_lo=0
-        )
-        hyps += res.hypotheses
-        if res.model is None:
+        uniforms = rng.random((max_samples, 3))
+        h, found, n_hyp = stage1_ransac(t1, t2, len1, len2, threshold, confidence, uniforms)
+        hyps += int(n_hyp)
+        if not found:
             continue
-        inl = prob.errors(res.model[None])[0] < threshold
+        transfer_errors(h, t1, t2, len1, len2, err)
+        inl = err < threshold
         if np.count_nonzero(inl) >= min_inliers:
             return LineHomographyFit(
-                pair, res.model, ctrl1, ctrl2, support[inl], hyps, orientation
+                pair, _as_matrix(h), ctrl1, ctrl2, support[inl], hyps, orientation
             ), hyps
     return None, hyps
 
@@ -154,11 +257,11 @@ def line_homography_error(
         (M,) errors in px (inf where a point maps to infinity).
     """
     c1, c2 = control_points
-    prob = LineHomographyProblem(
-        line_parameter(pts1, c1),
-        line_parameter(pts2, c2),
-        float(np.linalg.norm(c1[1] - c1[0])),
-        float(np.linalg.norm(c2[1] - c2[0])),
-        threshold=np.inf,
-    )
-    return prob.errors(np.asarray(H, dtype=np.float64)[None])[0]
+    t1 = np.ascontiguousarray(line_parameter(pts1, c1), dtype=np.float64)
+    t2 = np.ascontiguousarray(line_parameter(pts2, c2), dtype=np.float64)
+    out = np.empty(len(t1))
+    h = np.ascontiguousarray(H, dtype=np.float64).reshape(4)
+    len1 = float(np.linalg.norm(c1[1] - c1[0]))
+    len2 = float(np.linalg.norm(c2[1] - c2[0]))
+    transfer_errors(h, t1, t2, len1, len2, out)
+    return out

@@ -3,8 +3,10 @@ joint accumulator A(m, n) = number of correspondences whose point in image 1 lie
 whose point in image 2 lies on line n.
 
 The paper's accumulator is N x K1 x K2; summed over the correspondences it is the product of the
-two point-line incidence matrices, A = I1^T I2 (K1 x K2), which we compute sparsely from the
-(correspondence, line, line) incidences (see :func:`joint_incidences`).
+two point-line incidence matrices, A = I1^T I2 (K1 x K2), which a compiled kernel builds from each
+correspondence's (line, line) incidences and ranks (see :func:`rank_line_pairs`). The Hough
+transform votes the points directly (``cv2.HoughLinesPointSet`` on the pixels of the binary
+image), which gives the lines of ``cv2.HoughLines`` on that image without scanning it.
 """
 
 from __future__ import annotations
@@ -12,6 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 
@@ -69,15 +72,23 @@ def hough_lines(
     s = working_scale(image_size, opts.width)
     w = max(1, int(np.ceil(image_size[0] * s)))
     h = max(1, int(np.ceil(image_size[1] * s)))
-    img = np.zeros((h, w), dtype=np.uint8)
     q = np.rint(pts * s).astype(np.int64)
     ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
-    img[q[ok, 1], q[ok, 0]] = 255
-    found = cv2.HoughLines(img, 1.0, np.pi / 180.0, int(opts.min_votes))
+    # the set pixels of the binary image (one vote per pixel, however many points round to it)
+    pix = np.unique(q[ok, 1] * w + q[ok, 0])
+    if pix.size == 0:
+        return np.zeros((0, 3))
+    xy = np.stack([pix % w, pix // w], axis=1).astype(np.float32)
+    # HoughLinesPointSet votes the points directly (no image scan) over the rho range the
+    # image can produce for theta in [0, pi): x cos + y sin in [-(w - 1), hypot(w, h)]
+    found = cv2.HoughLinesPointSet(
+        xy.reshape(-1, 1, 2), int(opts.max_lines), int(opts.min_votes),
+        float(-w), float(np.ceil(np.hypot(w, h))), 1.0, 0.0, np.pi, np.pi / 180.0,
+    )  # fmt: skip
     if found is None:
         return np.zeros((0, 3))
-    rho, theta = found[: opts.max_lines, 0, 0].astype(np.float64), found[: opts.max_lines, 0, 1]
-    theta = theta.astype(np.float64)
+    found = found.reshape(-1, 3).astype(np.float64)  # (votes, rho, theta), strongest first
+    rho, theta = found[: opts.max_lines, 1], found[: opts.max_lines, 2]
     return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
 
 
@@ -115,50 +126,72 @@ def find_line_pairs(
         return []
     I1 = incidence(pts1, L1, image_size1, opts)
     I2 = incidence(pts2, L2, image_size2, opts)
-    key, corr = joint_incidences(I1, I2)
-    A = np.bincount(key, minlength=len(L1) * len(L2))  # the joint accumulator, flattened
-    cand = np.flatnonzero(A >= opts.min_votes)
-    if cand.size == 0:
-        return []
-    cand = cand[np.argsort(-A[cand], kind="stable")][: 20 * opts.max_pairs]
-    chosen: list[LinePair] = []
-    used = np.zeros(len(pts1), dtype=bool)  # matches already in a chosen support
-    for c in cand:
-        support = corr[key == c]
-        if np.count_nonzero(used[support]) * 2 > len(support):
-            continue
-        i, j = divmod(int(c), len(L2))
-        chosen.append(LinePair(L1[i], L2[j], support))
-        used[support] = True
-        if len(chosen) >= opts.max_pairs:
-            break
-    return chosen
+    lines, supports = rank_line_pairs(I1, I2, int(opts.min_votes), int(opts.max_pairs))
+    return [
+        LinePair(L1[i], L2[j], np.flatnonzero(sup))
+        for (i, j), sup in zip(lines, supports, strict=True)
+    ]
 
 
-def joint_incidences(I1: np.ndarray, I2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Every (correspondence, line m, line n) with the point in image 1 on m and in image 2 on n.
+@numba.njit(cache=True)
+def rank_line_pairs(
+    I1: np.ndarray, I2: np.ndarray, min_votes: int, max_pairs: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joint accumulator A = I1^T I2 and the greedy ranking of :func:`find_line_pairs`, compiled.
 
-    This is the sparse form of the paper's N x K1 x K2 accumulator: a correspondence on d1 lines
-    in image 1 and d2 in image 2 contributes d1 * d2 entries, never K1 * K2.
+    A(m, n) counts the correspondences on line m in image 1 and line n in image 2 (the paper's
+    N x K1 x K2 accumulator summed over N, built from each correspondence's d1 x d2 line
+    incidences). Pairs are taken in decreasing count (ties: smaller m * K2 + n first) among the
+    ``20 * max_pairs`` best with at least ``min_votes``; a pair sharing more than half of its
+    support with already chosen pairs is skipped.
 
     Args:
         I1: (N, K1) bool incidence in image 1. I2: (N, K2) bool incidence in image 2.
     Returns:
-        (key, corr): (E,) flat accumulator index m * K2 + n and (E,) correspondence index j.
+        (P, 2) line indices (m, n) and (P, N) bool supports of the chosen pairs, P <= max_pairs.
     """
-    j1, m = np.nonzero(I1)  # row-major: sorted by correspondence
-    j2, n = np.nonzero(I2)
-    N, K2 = I1.shape[0], I2.shape[1]
-    c2 = np.bincount(j2, minlength=N)
-    start2 = np.cumsum(c2) - c2
-    rep = c2[j1]
-    total = int(rep.sum())
-    if total == 0:
-        return np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64)
-    j_rep = np.repeat(j1, rep)
-    offset = np.arange(total) - np.repeat(np.cumsum(rep) - rep, rep)
-    n_rep = n[start2[j_rep] + offset]
-    return np.repeat(m, rep).astype(np.int64) * K2 + n_rep, j_rep
+    N, K1 = I1.shape
+    K2 = I2.shape[1]
+    A = np.zeros(K1 * K2, dtype=np.int64)
+    on2 = np.empty(K2, dtype=np.int64)
+    for j in range(N):
+        d2 = 0
+        for n in range(K2):
+            if I2[j, n]:
+                on2[d2] = n
+                d2 += 1
+        if d2 == 0:
+            continue
+        for m in range(K1):
+            if I1[j, m]:
+                for k in range(d2):
+                    A[m * K2 + on2[k]] += 1
+    cand = np.flatnonzero(A >= min_votes)
+    cand = cand[np.argsort(-A[cand], kind="mergesort")][: 20 * max_pairs]
+    lines = np.zeros((max_pairs, 2), dtype=np.int64)
+    supports = np.zeros((max_pairs, N), dtype=np.bool_)
+    used = np.zeros(N, dtype=np.bool_)
+    P = 0
+    for c in cand:
+        if P >= max_pairs:
+            break
+        m, n = c // K2, c % K2
+        size = 0
+        shared = 0
+        for j in range(N):
+            if I1[j, m] and I2[j, n]:
+                size += 1
+                if used[j]:
+                    shared += 1
+        if shared * 2 > size:
+            continue
+        for j in range(N):
+            if I1[j, m] and I2[j, n]:
+                supports[P, j] = True
+                used[j] = True
+        lines[P, 0], lines[P, 1] = m, n
+        P += 1
+    return lines[:P], supports[:P]
 
 
 def control_points(line: np.ndarray, image_size: tuple[float, float]) -> np.ndarray:

@@ -8,6 +8,7 @@ h = (a, b, c, d):  alpha' (c alpha + d beta) - beta' (a alpha + b beta) = 0.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
 
@@ -69,3 +70,81 @@ def inverse(H: np.ndarray) -> np.ndarray:
     out[..., 1, 0] = -H[..., 1, 0]
     out[..., 1, 1] = H[..., 0, 0]
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# Scalar kernels for the compiled stage-1 loop (line_homography_fit.stage1_ransac).
+# H is held as h = (a, b, c, d) for [[a, b], [c, d]].
+# --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True)
+def line_homography_3pt_kernel(t1: np.ndarray, t2: np.ndarray, out: np.ndarray) -> None:
+    """Minimal solver on line parameters: 3 correspondences t1[i] -> t2[i] into out (4,).
+
+    The null vector of the 3x4 system (rows of :func:`_rows` at (alpha, beta) = (1 - t, t)) by
+    cofactors, unit norm (the same H_e as :func:`line_homography_3pt`, up to sign).
+    """
+    A = np.empty((3, 4))
+    for i in range(3):
+        a1, b1, a2, b2 = 1.0 - t1[i], t1[i], 1.0 - t2[i], t2[i]
+        A[i, 0] = -b2 * a1
+        A[i, 1] = -b2 * b1
+        A[i, 2] = a2 * a1
+        A[i, 3] = a2 * b1
+    sign = 1.0
+    norm = 0.0
+    for j in range(4):
+        # 3x3 determinant of A without column j
+        c0 = 1 if j == 0 else 0
+        c1 = 2 if j <= 1 else 1
+        c2 = 3 if j <= 2 else 2
+        det = (
+            A[0, c0] * (A[1, c1] * A[2, c2] - A[1, c2] * A[2, c1])
+            - A[0, c1] * (A[1, c0] * A[2, c2] - A[1, c2] * A[2, c0])
+            + A[0, c2] * (A[1, c0] * A[2, c1] - A[1, c1] * A[2, c0])
+        )
+        out[j] = sign * det
+        norm += det * det
+        sign = -sign
+    norm = np.sqrt(norm)
+    for j in range(4):
+        out[j] = out[j] / norm if norm > 0.0 else 0.0
+
+
+@numba.njit(cache=True)
+def line_homography_lsq_kernel(t1: np.ndarray, t2: np.ndarray, mask: np.ndarray) -> np.ndarray:
+    """Least-squares H_e (4,) on the correspondences where mask is True (unit norm).
+
+    The smallest right singular vector of the K x 4 system, as :func:`line_homography_lsq`.
+    """
+    k = 0
+    for i in range(len(t1)):
+        if mask[i]:
+            k += 1
+    A = np.empty((k, 4))
+    r = 0
+    for i in range(len(t1)):
+        if mask[i]:
+            a1, b1, a2, b2 = 1.0 - t1[i], t1[i], 1.0 - t2[i], t2[i]
+            A[r, 0] = -b2 * a1
+            A[r, 1] = -b2 * b1
+            A[r, 2] = a2 * a1
+            A[r, 3] = a2 * b1
+            r += 1
+    _, _, vt = np.linalg.svd(A, full_matrices=False)
+    return vt[3].copy()
+
+
+@numba.njit(cache=True)
+def transfer_kernel(a: float, b: float, c: float, d: float, t: float) -> float:
+    """t' of t under H = [[a, b], [c, d]] ((alpha, beta) = (1 - t, t)); inf at infinity."""
+    alpha = a + (b - a) * t
+    beta = c + (d - c) * t
+    den = alpha + beta
+    if den == 0.0:
+        return np.inf
+    tp = beta / den
+    if not np.isfinite(tp):
+        return np.inf
+    return tp

@@ -1,0 +1,174 @@
+"""The compiled line-pair search and stage 1 against plain reference implementations: Hough
+lines from points vs cv2.HoughLines on the binary image, the joint accumulator and ranking vs a
+dense I1^T I2, the scalar H_e kernels vs the batched numpy solvers, stage-1 RANSAC on exact data."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from sepfm_ros.geometry.line_homography_fit import (
+    line_homography_error,
+    stage1_ransac,
+    transfer_errors,
+)
+from sepfm_ros.geometry.line_pairs import (
+    LineSearchOptions,
+    hough_lines,
+    incidence,
+    rank_line_pairs,
+    working_scale,
+)
+from sepfm_ros.geometry.solvers.line_homography import (
+    line_homography_3pt,
+    line_homography_3pt_kernel,
+    line_homography_lsq,
+    line_homography_lsq_kernel,
+    transfer,
+)
+
+
+def _points_with_lines(rng: np.random.Generator, size=(1024, 768), n_lines=4, n_rand=200):
+    w, h = size
+    pts = [np.c_[rng.uniform(0, w, n_rand), rng.uniform(0, h, n_rand)]]
+    for _ in range(n_lines):
+        a, b = rng.uniform([0, 0], [w, h], size=(2, 2))
+        t = rng.uniform(0, 1, 12)[:, None]
+        pts.append(a + t * (b - a))
+    return np.concatenate(pts)
+
+
+def _hough_on_image(pts, size, opts):
+    """The reference: cv2.HoughLines on the binary image of the points (the paper's B_1)."""
+    s = working_scale(size, opts.width)
+    w, h = int(np.ceil(size[0] * s)), int(np.ceil(size[1] * s))
+    img = np.zeros((h, w), np.uint8)
+    q = np.rint(pts * s).astype(int)
+    ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
+    img[q[ok, 1], q[ok, 0]] = 255
+    found = cv2.HoughLines(img, 1.0, np.pi / 180.0, opts.min_votes)
+    if found is None:
+        return np.zeros((0, 2))
+    return found[:, 0].astype(np.float64)  # (rho, theta) at the working resolution
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_hough_from_points_matches_hough_on_binary_image(seed):
+    rng = np.random.default_rng(seed)
+    size = (1024, 768)
+    pts = _points_with_lines(rng, size)
+    opts = LineSearchOptions(max_lines=10_000)
+    ours = hough_lines(pts, size, opts)
+    ref = _hough_on_image(pts, size, opts)
+    s = working_scale(size, opts.width)
+    assert len(ours) > 4
+    # same set of (rho, theta) cells; ties in the vote count may come in another order
+    theta = np.arctan2(ours[:, 1], ours[:, 0])
+    cells = {(round(-c * s), round(np.degrees(t))) for c, t in zip(ours[:, 2], theta, strict=True)}
+    ref_cells = {(round(r), round(np.degrees(t))) for r, t in ref}
+    assert len(cells ^ ref_cells) <= 0.02 * len(ref_cells)
+    # unit normals, strongest first: the first line carries at least as many points as any other
+    assert np.allclose(np.hypot(ours[:, 0], ours[:, 1]), 1.0)
+    inc = incidence(pts, ours, size, opts)
+    assert inc[:, 0].sum() >= 12
+
+
+def _rank_reference(I1, I2, min_votes, max_pairs):
+    """Greedy ranking on the dense accumulator A = I1^T I2."""
+    A = (I1.astype(int).T @ I2.astype(int)).ravel()
+    cand = np.flatnonzero(A >= min_votes)
+    cand = cand[np.argsort(-A[cand], kind="stable")][: 20 * max_pairs]
+    used = np.zeros(len(I1), bool)
+    out = []
+    for c in cand:
+        i, j = divmod(int(c), I2.shape[1])
+        sup = I1[:, i] & I2[:, j]
+        if np.count_nonzero(used[sup]) * 2 > sup.sum():
+            continue
+        out.append((i, j, np.flatnonzero(sup)))
+        used |= sup
+        if len(out) >= max_pairs:
+            break
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_rank_line_pairs_matches_dense_accumulator(seed):
+    rng = np.random.default_rng(seed)
+    n, k1, k2 = 300, 40, 50
+    I1 = rng.random((n, k1)) < 0.08
+    I2 = rng.random((n, k2)) < 0.08
+    for min_votes, max_pairs in ((2, 6), (3, 3), (4, 10)):
+        lines, supports = rank_line_pairs(I1, I2, min_votes, max_pairs)
+        ref = _rank_reference(I1, I2, min_votes, max_pairs)
+        assert len(lines) == len(ref) > 0
+        for (i, j), sup, (ri, rj, rsup) in zip(lines, supports, ref, strict=True):
+            assert (i, j) == (ri, rj)
+            assert np.array_equal(np.flatnonzero(sup), rsup)
+
+
+def test_rank_line_pairs_without_enough_votes_is_empty():
+    I1 = np.zeros((20, 3), bool)
+    I2 = np.ones((20, 4), bool)
+    lines, supports = rank_line_pairs(I1, I2, 4, 6)
+    assert lines.shape == (0, 2) and supports.shape == (0, 20)
+
+
+def test_scalar_line_homography_kernels_match_numpy_solvers():
+    rng = np.random.default_rng(1)
+    for _ in range(20):
+        H = rng.normal(size=(2, 2))
+        t1 = rng.uniform(-0.5, 1.5, 9)
+        t2 = transfer(H, t1) + rng.normal(0, 1e-3, 9)
+        ab1, ab2 = np.stack([1 - t1, t1], -1), np.stack([1 - t2, t2], -1)
+        h = np.empty(4)
+        line_homography_3pt_kernel(t1[:3], t2[:3], h)
+        ref = line_homography_3pt(ab1[None, :3], ab2[None, :3])[0].ravel()
+        assert min(np.abs(h - ref).max(), np.abs(h + ref).max()) < 1e-9
+        lsq = line_homography_lsq_kernel(t1, t2, np.ones(9, bool))
+        ref = line_homography_lsq(ab1, ab2).ravel()
+        assert min(np.abs(lsq - ref).max(), np.abs(lsq + ref).max()) < 1e-9
+
+
+def test_transfer_errors_match_numpy_transfer_and_line_homography_error():
+    rng = np.random.default_rng(2)
+    H = rng.normal(size=(2, 2))
+    t1, t2 = rng.uniform(0, 1, 30), rng.uniform(0, 1, 30)
+    out = np.empty(30)
+    transfer_errors(H.ravel(), t1, t2, 300.0, 200.0, out)
+    Hinv = np.array([[H[1, 1], -H[0, 1]], [-H[1, 0], H[0, 0]]])
+    ref = 0.5 * (np.abs(transfer(H, t1) - t2) * 200.0 + np.abs(transfer(Hinv, t2) - t1) * 300.0)
+    assert np.allclose(out, ref)
+    # the public px error on points along two segments is the same quantity
+    c1 = np.array([[0.0, 0.0], [300.0, 0.0]])
+    c2 = np.array([[0.0, 10.0], [0.0, 210.0]])
+    p1 = c1[0] + t1[:, None] * (c1[1] - c1[0])
+    p2 = c2[0] + t2[:, None] * (c2[1] - c2[0])
+    assert np.allclose(line_homography_error(H, (c1, c2), p1, p2), ref)
+
+
+@pytest.mark.parametrize("seed", range(5))
+def test_stage1_ransac_recovers_exact_line_homography_among_outliers(seed):
+    rng = np.random.default_rng(seed)
+    H = rng.normal(size=(2, 2))
+    t1 = rng.uniform(0, 1, 40)
+    t2 = transfer(H, t1)
+    wrong = rng.random(40) < 0.4
+    t2[wrong] = rng.uniform(0, 1, wrong.sum())
+    u = rng.random((200, 3))
+    h, found, hyps = stage1_ransac(t1, t2, 400.0, 400.0, 0.5, 0.99, u)
+    assert found and 0 < hyps <= 200 + 200
+    err = np.empty(40)
+    transfer_errors(h, t1, t2, 400.0, 400.0, err)
+    assert (err[~wrong] < 1e-6).all() and np.count_nonzero(err[wrong] < 0.5) <= 2
+    assert np.allclose(transfer(h.reshape(2, 2), t1[~wrong]), t2[~wrong], atol=1e-9)
+    # the uniforms are the only source of randomness: same numbers, same result
+    h2, found2, hyps2 = stage1_ransac(t1, t2, 400.0, 400.0, 0.5, 0.99, u.copy())
+    assert found2 and hyps2 == hyps and np.array_equal(h, h2)
+
+
+def test_stage1_ransac_without_enough_points_finds_nothing():
+    h, found, hyps = stage1_ransac(np.array([0.1, 0.2]), np.array([0.3, 0.4]), 1.0, 1.0, 0.5,
+                                   0.99, np.random.default_rng(0).random((50, 3)))  # fmt: skip
+    assert not found and hyps == 0

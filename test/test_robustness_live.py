@@ -61,8 +61,7 @@ FUZZ_COMPRESSED = int(os.environ.get("SEPFM_FUZZ_COMPRESSED", 3000))  # ... Comp
 VALID_EVERY = 100  # one valid pair after this many malformed messages
 FUZZ_RATE_HZ = float(os.environ.get("SEPFM_FUZZ_RATE_HZ", 400.0))  # malformed messages/s
 DEEP_SHARE = 0.05  # share of malformed messages only found when decoding (sent in a pair)
-RSS_LIMIT_MB = 50.0
-WARMUP_MESSAGES = 1000  # RSS growth is judged from here (see _check_fuzz)
+RSS_LIMIT_MB = 50.0  # growth of the node's resident memory over a whole fuzz run (from its start)
 # Reliable keep-all both ways (the node's input QoS overridden): the fuzz must reach the node
 # message by message, or nothing could be counted per kind (checked: the node's received counters
 # must equal what was sent). With keep-last the node's queue overwrote ~10% at 400 msg/s.
@@ -293,8 +292,6 @@ def _run_fuzz(
             time.sleep(delay)
         if i % 1000 == 0:
             rss_trace.append(round(rss_mb(proc.proc.pid), 1))
-        if i == WARMUP_MESSAGES:
-            rss_warm = rss_mb(proc.proc.pid)
         stamp = next_stamp(1)
         if rng.random() < DEEP_SHARE:
             bad, good = make_deep(stamp)
@@ -328,14 +325,12 @@ def _run_fuzz(
     assert {k: int(health[k]) for k in want} == want, "messages lost in transport"
     rss_trace.append(round(rss_mb(proc.proc.pid), 1))
     figures.add(name, rss_trace_mb_per_1000_messages=rss_trace)
-    health["_rss_warm"] = rss_warm
     return sent, kinds, valid_stamps, deep_stamps, health, publish_s
 
 
 def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rss0, figures, sec):
     assert proc.proc.poll() is None, proc.output()[-3000:]
     rss1 = rss_mb(proc.proc.pid)
-    rss_warm = health.pop("_rss_warm")
     counted = {
         k: int(health.get(f"errors_{k}", 0)) - int(base.get(f"errors_{k}", 0)) for k in kinds
     }
@@ -355,10 +350,8 @@ def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rs
         crashes=0 if proc.proc.poll() is None else 1,
         dropped_pairs=dropped,
         rss_start_mb=round(rss0, 1),
-        rss_after_warmup_mb=round(rss_warm, 1),
         rss_end_mb=round(rss1, 1),
         rss_growth_total_mb=round(rss1 - rss0, 1),
-        rss_growth_after_warmup_mb=round(rss1 - rss_warm, 1),
     )
     assert counted == kinds, (counted, kinds)
     assert total == sum(kinds.values())
@@ -367,11 +360,12 @@ def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rs
     )
     assert all(lv == DiagnosticStatus.ERROR for lv in deep_levels)
     assert dropped == 0
-    # The first WARMUP_MESSAGES fill the middleware's payload buffers and the allocator's pools
-    # (a bare rclpy subscriber fed the same stream grows ~25 MB there too); the rest must not
-    # grow memory by RSS_LIMIT_MB. Both figures are reported.
-    assert rss1 - rss_warm < RSS_LIMIT_MB
+    # Over the whole run, from the node's state after its first pair (no warm-up exemption).
+    # Without the node's memory settings (sepfm_ros/ros/memory.py: fixed malloc thresholds,
+    # DYNAMIC Fast DDS subscriber history) this grew ~60-70 MB on the raw fuzz.
+    assert rss1 - rss0 < RSS_LIMIT_MB
     log = proc.output()
+    assert "DDS subscriptions with DYNAMIC history" in log, log[-3000:]
     assert "Traceback" not in log, log[-3000:]
 
 

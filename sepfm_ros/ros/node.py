@@ -32,8 +32,6 @@ after every large product and take it from the match thread.
 from __future__ import annotations
 
 import argparse
-import ctypes
-import ctypes.util
 import statistics
 import threading
 import time
@@ -72,6 +70,11 @@ from sepfm_ros.ros.image_conversion import (
     check_image,
     message_to_numpy,
     numpy_to_image,
+)
+from sepfm_ros.ros.memory import (
+    configure_malloc,
+    release_free_memory,
+    use_node_dds_profiles,
 )
 from sepfm_ros.ros.messages import (
     copy_header,
@@ -264,31 +267,6 @@ class MatchedJob:
     images: tuple[np.ndarray, np.ndarray]  # decoded a, b (for ~/debug_image)
     wait_ms: float  # receipt -> start of processing (decode)
     matched_at: float  # time.monotonic() when matching ended
-
-
-def _load_malloc_trim():
-    """glibc's malloc_trim (None elsewhere): hands freed heap pages back to the system."""
-    try:
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6")
-        trim = libc.malloc_trim
-    except (OSError, AttributeError):
-        return None
-    trim.argtypes = [ctypes.c_size_t]
-    trim.restype = ctypes.c_int
-    return trim
-
-
-_MALLOC_TRIM = _load_malloc_trim()
-
-
-def release_free_memory() -> None:
-    """Return freed heap memory to the system (glibc only; a no-op elsewhere).
-
-    Images of many different sizes (e.g. a stream of malformed messages) leave the C heap
-    fragmented: freed but unreturned pages that show up as resident memory growth.
-    """
-    if _MALLOC_TRIM is not None:
-        _MALLOC_TRIM(0)
 
 
 def limit_thread_pools(threads: int = 1) -> None:
@@ -812,6 +790,9 @@ def main(argv: list[str]) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.parse_args(own)
+    # before any image flows and before rclpy creates the DDS participant (see ros/memory.py)
+    malloc_fixed = configure_malloc()
+    dds_profiles = use_node_dds_profiles()
     limit_thread_pools(1)
     rclpy.init(args=["sepfm", *argv])
     node = None
@@ -821,6 +802,10 @@ def main(argv: list[str]) -> int:
         except ValueError as err:
             print(f"sepfm_ros node: {err}", flush=True)
             return 2
+        node.get_logger().info(
+            f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
+            + ("DDS subscriptions with DYNAMIC history" if dds_profiles else "DDS config left")
+        )
         executor = SingleThreadedExecutor()
         executor.add_node(node)
         try:

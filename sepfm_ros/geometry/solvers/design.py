@@ -32,3 +32,72 @@ def symmetrize(G: np.ndarray) -> None:
     for p in range(9):
         for q in range(p):
             G[p, q] = G[q, p]
+
+
+@numba.njit(cache=True)
+def null_basis(A: np.ndarray, basis: np.ndarray) -> bool:
+    """Orthonormal basis of the null space of A (K, 9), K < 9 rows of full rank K.
+
+    Gauss-Jordan elimination with full pivoting (a few microseconds for a minimal sample, against
+    tens for an SVD or a Gram-matrix eigen-decomposition).
+
+    Args:
+        A: (K, 9) design rows (normalised coordinates). basis: (9 - K, 9) output rows.
+    Returns:
+        False when a pivot vanishes (rank < K: a degenerate sample; ``basis`` is undefined).
+    """
+    K = A.shape[0]
+    M = A.copy()
+    perm = np.arange(9)
+    scale = 0.0
+    for i in range(K):
+        for j in range(9):
+            scale = max(scale, abs(M[i, j]))
+    if not (scale > 0 and np.isfinite(scale)):
+        return False
+    for r in range(K):
+        best, pi, pj = 0.0, r, r
+        for i in range(r, K):
+            for j in range(r, 9):
+                v = abs(M[i, j])
+                if v > best:
+                    best, pi, pj = v, i, j
+        if best <= 1e-10 * scale:
+            return False
+        if pi != r:
+            for j in range(9):
+                M[r, j], M[pi, j] = M[pi, j], M[r, j]
+        if pj != r:
+            for i in range(K):
+                M[i, r], M[i, pj] = M[i, pj], M[i, r]
+            perm[r], perm[pj] = perm[pj], perm[r]
+        piv = M[r, r]
+        for j in range(r, 9):
+            M[r, j] /= piv
+        for i in range(K):
+            if i != r:
+                f = M[i, r]
+                if f != 0.0:
+                    for j in range(r, 9):
+                        M[i, j] -= f * M[r, j]
+    # M = [I | B] in permuted columns: null vector q has 1 at free column K + q, -B[:, q] above
+    for q in range(9 - K):
+        for j in range(9):
+            basis[q, j] = 0.0
+        basis[q, perm[K + q]] = 1.0
+        for r in range(K):
+            basis[q, perm[r]] = -M[r, K + q]
+    for q in range(9 - K):  # Gram-Schmidt
+        for p in range(q):
+            d = 0.0
+            for j in range(9):
+                d += basis[q, j] * basis[p, j]
+            for j in range(9):
+                basis[q, j] -= d * basis[p, j]
+        n = 0.0
+        for j in range(9):
+            n += basis[q, j] * basis[q, j]
+        n = np.sqrt(n)
+        for j in range(9):
+            basis[q, j] /= n
+    return True

@@ -6,35 +6,46 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.epipolar import rank2_unit_kernel
-from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
+from sepfm_ros.geometry.solvers.design import add_outer, design_row, null_basis, symmetrize
 
 
 @numba.njit(cache=True)
 def eight_point_kernel(x1: np.ndarray, x2: np.ndarray, w: np.ndarray) -> np.ndarray:
     """(M, K, 2) normalised samples, (M, K) row weights -> (M, 3, 3) rank-2 unit-norm F.
 
-    The null vector comes from the 9x9 normal matrix (cheaper than an SVD of (K, 9) rows).
+    K = 8: the exact null vector by elimination; K > 8 (or a rank-deficient sample): the
+    least-squares one from the 9x9 normal matrix (cheaper than an SVD of (K, 9) rows).
     """
     M, K = x1.shape[0], x1.shape[1]
     out = np.empty((M, 3, 3))
     r = np.empty(9)
+    A = np.empty((K, 9))
+    basis = np.empty((1, 9))
+    F = np.empty((3, 3))
     for m in range(M):
-        G = np.zeros((9, 9))
-        for k in range(K):
-            design_row(x1[m, k, 0], x1[m, k, 1], x2[m, k, 0], x2[m, k, 1], r)
-            add_outer(G, r, w[m, k] * w[m, k])
-        symmetrize(G)
-        if not np.isfinite(G).all():
+        exact = False
+        if K == 8:  # minimal sample: the null vector by elimination (row weights do not matter)
+            for k in range(K):
+                design_row(x1[m, k, 0], x1[m, k, 1], x2[m, k, 0], x2[m, k, 1], A[k])
+            exact = null_basis(A, basis)
             for i in range(9):
-                out[m, i // 3, i % 3] = np.nan
-            continue
-        _, vecs = np.linalg.eigh(G)
-        F = np.empty((3, 3))
+                F[i // 3, i % 3] = basis[0, i]
+        if not exact:
+            G = np.zeros((9, 9))
+            for k in range(K):
+                design_row(x1[m, k, 0], x1[m, k, 1], x2[m, k, 0], x2[m, k, 1], r)
+                add_outer(G, r, w[m, k] * w[m, k])
+            symmetrize(G)
+            if not np.isfinite(G).all():
+                for i in range(9):
+                    out[m, i // 3, i % 3] = np.nan
+                continue
+            _, vecs = np.linalg.eigh(G)
+            for i in range(9):
+                F[i // 3, i % 3] = vecs[i, 0]
+        G3 = rank2_unit_kernel(F)
         for i in range(9):
-            F[i // 3, i % 3] = vecs[i, 0]
-        F = rank2_unit_kernel(F)
-        for i in range(9):
-            out[m, i // 3, i % 3] = F[i // 3, i % 3]
+            out[m, i // 3, i % 3] = G3[i // 3, i % 3]
     return out
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.solvers.design import design_row
+from sepfm_ros.geometry.solvers.design import design_row, null_basis
 
 # det(F2 + s (F1 - F2)) is a cubic in s; sample it at these s and solve for the coefficients.
 _S = np.array([0.0, 1.0, -1.0, 2.0])
@@ -31,12 +31,18 @@ def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> 
 
     Models are row-major (9,) at unit norm.
     """
-    _, _, Vt = np.linalg.svd(A)  # full 9x9 Vt: the last two rows span the (LS) null space
     f2 = np.empty(9)
     d = np.empty(9)
-    for i in range(9):
-        f2[i] = Vt[7, i]
-        d[i] = Vt[8, i] - Vt[7, i]
+    basis = np.empty((2, 9))
+    if A.shape[0] == 7 and null_basis(A, basis):  # minimal sample: exact null space
+        for i in range(9):
+            f2[i] = basis[0, i]
+            d[i] = basis[1, i] - basis[0, i]
+    else:  # K > 7 (or rank-deficient): the least-squares two-dimensional null space
+        _, _, Vt = np.linalg.svd(A)  # full 9x9 Vt: its last two rows
+        for i in range(9):
+            f2[i] = Vt[7, i]
+            d[i] = Vt[8, i] - Vt[7, i]
     dets = np.empty(4)
     for j in range(4):
         dets[j] = _det_pencil(f2, d, _S[j])

@@ -15,6 +15,7 @@ from sepfm_ros.geometry.line_homography_fit import (
 )
 from sepfm_ros.geometry.line_pairs import (
     LineSearchOptions,
+    control_points,
     hough_lines,
     incidence,
     rank_line_pairs,
@@ -172,3 +173,31 @@ def test_stage1_ransac_without_enough_points_finds_nothing():
     h, found, hyps = stage1_ransac(np.array([0.1, 0.2]), np.array([0.3, 0.4]), 1.0, 1.0, 0.5,
                                    0.99, np.random.default_rng(0).random((50, 3)))  # fmt: skip
     assert not found and hyps == 0
+
+
+def _control_points_reference(line, image_size):
+    """The plain numpy form: border intersections, the two farthest apart."""
+    a, b, c = line
+    w, h = image_size[0] - 1.0, image_size[1] - 1.0
+    pts = [(u, -(a * u + c) / b) for u in (0.0, w) if abs(b) > 1e-12]
+    pts += [(-(b * v + c) / a, v) for v in (0.0, h) if abs(a) > 1e-12]
+    P = np.array(pts)
+    inside = (P[:, 0] >= -1e-6) & (P[:, 0] <= w + 1e-6) & (P[:, 1] >= -1e-6) & (P[:, 1] <= h + 1e-6)
+    Q = P[inside] if np.count_nonzero(inside) >= 2 else P
+    d = np.linalg.norm(Q[:, None] - Q[None], axis=2)
+    i, j = np.unravel_index(np.argmax(d), d.shape)
+    return np.array([Q[i], Q[j]])
+
+
+def test_control_points_are_the_farthest_border_intersections():
+    rng = np.random.default_rng(3)
+    size = (640, 480)
+    lines = [np.array([1.0, 0.0, -100.0]), np.array([0.0, 1.0, -479.0]), np.array([0.6, 0.8, 5e3])]
+    for _ in range(200):
+        th = rng.uniform(0, np.pi)
+        p = rng.uniform([0, 0], size)
+        lines.append(np.array([np.cos(th), np.sin(th), -(np.cos(th) * p[0] + np.sin(th) * p[1])]))
+    for line in lines:
+        ctrl = control_points(line, size)
+        assert np.allclose(ctrl, _control_points_reference(line, size))
+        assert np.allclose(ctrl @ line[:2] + line[2], 0.0, atol=1e-6)  # both on the line

@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import cv2
+import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
@@ -73,10 +74,27 @@ def msac_cost(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, threshold: floa
 
 def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
     """(N,) ||H x1 - x2|| in px (inf where H maps to infinity)."""
-    q = homogeneous(pts1) @ H.T
-    with np.errstate(divide="ignore", invalid="ignore"):
-        err = np.linalg.norm(q[:, :2] / q[:, 2:] - pts2, axis=1)
-    return np.nan_to_num(err, nan=np.inf)
+    return _transfer_error(
+        np.ascontiguousarray(H, dtype=np.float64),
+        np.ascontiguousarray(pts1, dtype=np.float64),
+        np.ascontiguousarray(pts2, dtype=np.float64),
+    )
+
+
+@numba.njit(cache=True)
+def _transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
+    out = np.empty(len(pts1))
+    for i in range(len(pts1)):
+        x, y = pts1[i, 0], pts1[i, 1]
+        w = H[2, 0] * x + H[2, 1] * y + H[2, 2]
+        if w == 0.0:
+            out[i] = np.inf
+            continue
+        du = (H[0, 0] * x + H[0, 1] * y + H[0, 2]) / w - pts2[i, 0]
+        dv = (H[1, 0] * x + H[1, 1] * y + H[1, 2]) / w - pts2[i, 1]
+        e = np.sqrt(du * du + dv * dv)
+        out[i] = e if np.isfinite(e) else np.inf
+    return out
 
 
 def parallax_models(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, pairs: np.ndarray):
@@ -131,9 +149,10 @@ def plane_and_parallax(
     out = PlaneCheck(F)
     if np.count_nonzero(inl) < 8:
         return out
-    # a robust H on all matches (the plane may hold matches F rejected); seeded via OpenCV's RNG
+    # a robust H on F's inliers (the question is whether one plane holds plane_share of them;
+    # matches F rejected would only slow the search down), seeded via OpenCV's RNG
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    H, _ = cv2.findHomography(pts1, pts2, cv2.RHO, tol, maxIters=500, confidence=0.995)
+    H, _ = cv2.findHomography(pts1[inl], pts2[inl], cv2.RHO, tol, maxIters=500, confidence=0.995)
     if H is None:
         return out
     err_h = transfer_error(H, pts1, pts2)
@@ -205,6 +224,6 @@ def chance_inliers(
     n = len(pts1)
     if n < 2:
         return 0.0
-    perms = np.stack([rng.permutation(n) for _ in range(shuffles)])  # (S, N)
+    perms = rng.permuted(np.tile(np.arange(n), (shuffles, 1)), axis=1)  # (S, N)
     d = _sed(F, np.tile(pts1, (shuffles, 1)), pts2[perms.ravel()])
     return float(np.count_nonzero(d < threshold)) / shuffles

@@ -8,6 +8,7 @@ symmetric transfer error along the lines, and adaptive termination F(3, r).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numba
@@ -220,11 +221,11 @@ def fit_line_homography(
     hyps = 0
     if len(support) < min_inliers:
         return None, 0
-    len1 = float(np.linalg.norm(ctrl1[1] - ctrl1[0])) * scale1
+    len1 = math.hypot(*(ctrl1[1] - ctrl1[0])) * scale1
     err = np.empty(len(support))
     for orientation, ctrl2 in ((1, base2), (2, base2[::-1].copy())):
         t2 = line_parameter(pts2[support], ctrl2)
-        len2 = float(np.linalg.norm(ctrl2[1] - ctrl2[0])) * scale2
+        len2 = math.hypot(*(ctrl2[1] - ctrl2[0])) * scale2
         uniforms = rng.random((max_samples, 3))
         h, found, n_hyp = stage1_ransac(t1, t2, len1, len2, threshold, confidence, uniforms)
         hyps += int(n_hyp)

@@ -72,17 +72,13 @@ def hough_lines(
     s = working_scale(image_size, opts.width)
     w = max(1, int(np.ceil(image_size[0] * s)))
     h = max(1, int(np.ceil(image_size[1] * s)))
-    q = np.rint(pts * s).astype(np.int64)
-    ok = (q[:, 0] >= 0) & (q[:, 0] < w) & (q[:, 1] >= 0) & (q[:, 1] < h)
-    # the set pixels of the binary image (one vote per pixel, however many points round to it)
-    pix = np.unique(q[ok, 1] * w + q[ok, 0])
-    if pix.size == 0:
+    xy = binary_image_pixels(np.ascontiguousarray(pts, dtype=np.float64), s, w, h)
+    if len(xy) == 0:
         return np.zeros((0, 3))
-    xy = np.stack([pix % w, pix // w], axis=1).astype(np.float32)
     # HoughLinesPointSet votes the points directly (no image scan) over the rho range the
     # image can produce for theta in [0, pi): x cos + y sin in [-(w - 1), hypot(w, h)]
     found = cv2.HoughLinesPointSet(
-        xy.reshape(-1, 1, 2), int(opts.max_lines), int(opts.min_votes),
+        xy, int(opts.max_lines), int(opts.min_votes),
         float(-w), float(np.ceil(np.hypot(w, h))), 1.0, 0.0, np.pi, np.pi / 180.0,
     )  # fmt: skip
     if found is None:
@@ -92,13 +88,54 @@ def hough_lines(
     return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
 
 
+@numba.njit(cache=True)
+def binary_image_pixels(pts: np.ndarray, scale: float, w: int, h: int) -> np.ndarray:
+    """The set pixels of the binary image of (N, 2) points at ``scale`` in a w x h image.
+
+    Returns:
+        (M, 1, 2) float32 pixel coordinates (x, y), each set pixel once, in raster order (points
+        rounded to the nearest pixel; points outside the image are dropped).
+    """
+    keys = np.empty(len(pts), dtype=np.int64)
+    k = 0
+    for i in range(len(pts)):
+        x = np.rint(pts[i, 0] * scale)
+        y = np.rint(pts[i, 1] * scale)
+        if x >= 0 and x < w and y >= 0 and y < h:
+            keys[k] = int(y) * w + int(x)
+            k += 1
+    keys = np.sort(keys[:k])
+    out = np.empty((k, 1, 2), dtype=np.float32)
+    m = 0
+    for i in range(k):
+        if i == 0 or keys[i] != keys[i - 1]:
+            out[m, 0, 0] = keys[i] % w
+            out[m, 0, 1] = keys[i] // w
+            m += 1
+    return out[:m]
+
+
 def incidence(
     pts: np.ndarray, lines: np.ndarray, image_size: tuple[float, float], opts: LineSearchOptions
 ) -> np.ndarray:
     """(N, L) bool: point i within C (working-resolution px) of line j."""
     s = working_scale(image_size, opts.width)
-    d = np.abs(pts @ lines[:, :2].T + lines[:, 2]) * s
-    return d < opts.distance
+    return _incidence(
+        np.ascontiguousarray(pts, dtype=np.float64),
+        np.ascontiguousarray(lines, dtype=np.float64),
+        float(opts.distance) / s,
+    )
+
+
+@numba.njit(cache=True)
+def _incidence(pts: np.ndarray, lines: np.ndarray, dist: float) -> np.ndarray:
+    """(N, L) bool: |a u + b v + c| < dist (px of the image) for points (N, 2), lines (L, 3)."""
+    out = np.empty((len(pts), len(lines)), dtype=np.bool_)
+    for i in range(len(pts)):
+        u, v = pts[i, 0], pts[i, 1]
+        for j in range(len(lines)):
+            out[i, j] = abs(lines[j, 0] * u + lines[j, 1] * v + lines[j, 2]) < dist
+    return out
 
 
 def find_line_pairs(
@@ -153,6 +190,8 @@ def rank_line_pairs(
     N, K1 = I1.shape
     K2 = I2.shape[1]
     A = np.zeros(K1 * K2, dtype=np.int64)
+    # correspondences on each line of image 1 (CSR, ascending), built in the same pass
+    col_count = np.zeros(K1 + 1, dtype=np.int64)
     on2 = np.empty(K2, dtype=np.int64)
     for j in range(N):
         d2 = 0
@@ -160,12 +199,19 @@ def rank_line_pairs(
             if I2[j, n]:
                 on2[d2] = n
                 d2 += 1
-        if d2 == 0:
-            continue
         for m in range(K1):
             if I1[j, m]:
+                col_count[m + 1] += 1
                 for k in range(d2):
                     A[m * K2 + on2[k]] += 1
+    start = np.cumsum(col_count)
+    col = np.empty(start[K1], dtype=np.int64)
+    fill = start[:K1].copy()
+    for j in range(N):
+        for m in range(K1):
+            if I1[j, m]:
+                col[fill[m]] = j
+                fill[m] += 1
     cand = np.flatnonzero(A >= min_votes)
     cand = cand[np.argsort(-A[cand], kind="mergesort")][: 20 * max_pairs]
     lines = np.zeros((max_pairs, 2), dtype=np.int64)
@@ -176,17 +222,16 @@ def rank_line_pairs(
         if P >= max_pairs:
             break
         m, n = c // K2, c % K2
-        size = 0
         shared = 0
-        for j in range(N):
-            if I1[j, m] and I2[j, n]:
-                size += 1
-                if used[j]:
-                    shared += 1
-        if shared * 2 > size:
+        for k in range(start[m], start[m + 1]):
+            j = col[k]
+            if I2[j, n] and used[j]:
+                shared += 1
+        if shared * 2 > A[c]:
             continue
-        for j in range(N):
-            if I1[j, m] and I2[j, n]:
+        for k in range(start[m], start[m + 1]):
+            j = col[k]
+            if I2[j, n]:
                 supports[P, j] = True
                 used[j] = True
         lines[P, 0], lines[P, 1] = m, n
@@ -203,24 +248,45 @@ def control_points(line: np.ndarray, image_size: tuple[float, float]) -> np.ndar
         (2, 2) the two border points farthest apart (pixel centres span [0, w-1] x [0, h-1]);
         for a line missing the image, the two points of the line closest to the image corners.
     """
-    a, b, c = line
-    w, h = float(image_size[0]) - 1.0, float(image_size[1]) - 1.0
-    pts = []
+    a, b, c = (float(v) for v in line)
+    return _control_points(a, b, c, float(image_size[0]) - 1.0, float(image_size[1]) - 1.0)
+
+
+@numba.njit(cache=True)
+def _control_points(a: float, b: float, c: float, w: float, h: float) -> np.ndarray:
+    """:func:`control_points` of line (a, b, c) in [0, w] x [0, h], compiled."""
+    P = np.empty((4, 2))
+    n = 0
     if abs(b) > 1e-12:
         for u in (0.0, w):
-            pts.append((u, -(a * u + c) / b))
+            P[n, 0], P[n, 1] = u, -(a * u + c) / b
+            n += 1
     if abs(a) > 1e-12:
         for v in (0.0, h):
-            pts.append((-(b * v + c) / a, v))
-    P = np.array(pts)
-    inside = (P[:, 0] >= -1e-6) & (P[:, 0] <= w + 1e-6) & (P[:, 1] >= -1e-6) & (P[:, 1] <= h + 1e-6)
-    Q = P[inside] if np.count_nonzero(inside) >= 2 else P
-    d = np.linalg.norm(Q[:, None] - Q[None], axis=2)
-    i, j = np.unravel_index(np.argmax(d), d.shape)
-    if d[i, j] < 1e-9:  # degenerate: use a unit segment along the line
-        p0 = -c * np.array([a, b])
-        return np.array([p0, p0 + np.array([-b, a])])
-    return np.array([Q[i], Q[j]])
+            P[n, 0], P[n, 1] = -(b * v + c) / a, v
+            n += 1
+    inside = np.zeros(n, dtype=np.bool_)
+    k = 0
+    for i in range(n):
+        x, y = P[i, 0], P[i, 1]
+        inside[i] = x >= -1e-6 and x <= w + 1e-6 and y >= -1e-6 and y <= h + 1e-6
+        if inside[i]:
+            k += 1
+    Q = P[:n][inside] if k >= 2 else P[:n]
+    bi, bj, best = 0, 0, -1.0
+    for i in range(len(Q)):
+        for j in range(len(Q)):
+            d = np.hypot(Q[i, 0] - Q[j, 0], Q[i, 1] - Q[j, 1])
+            if d > best:
+                bi, bj, best = i, j, d
+    out = np.empty((2, 2))
+    if best < 1e-9:  # degenerate: use a unit segment along the line
+        out[0, 0], out[0, 1] = -c * a, -c * b
+        out[1, 0], out[1, 1] = -c * a - b, -c * b + a
+        return out
+    out[0] = Q[bi]
+    out[1] = Q[bj]
+    return out
 
 
 def line_parameter(pts: np.ndarray, ctrl: np.ndarray) -> np.ndarray:

@@ -31,6 +31,7 @@ from ros_helpers import (  # noqa: E402
     rss_mb,
     send_pair,
     start_node,
+    status_values,
 )
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
@@ -495,6 +496,13 @@ def pair_msgs(images, stamp):
     return image_msg(images[0], stamp), image_msg(images[1], stamp)
 
 
+def stage_ms(client, stamps, key) -> dict[int, float]:
+    """stamp -> the node's own timing ``key`` (e.g. "wait": receipt -> start of work), ms."""
+    with client.lock:
+        values = {s: status_values(client.info[s]) for s in stamps if s in client.info}
+    return {s: float(v[f"ms_{key}"]) for s, v in values.items() if f"ms_{key}" in v}
+
+
 def latency_ms(client, stamps, sent_at):
     """End-to-end latency (publish in this process -> ~/estimate_info back), ms, answered only."""
     with client.lock:
@@ -720,6 +728,8 @@ def test_dds_peer_started_and_killed_repeatedly_does_not_disturb_node(robust, fr
 
 # --------------------------------------------------------------------------- overload
 OVERLOAD_S = float(os.environ.get("SEPFM_OVERLOAD_S", 60.0))
+UNLOADED_PAIRS = 50  # for the unloaded latency p95
+SATURATE_S = 8.0  # input well above the node's rate, to measure that rate
 RECOVERY_S = 10.0
 
 
@@ -749,7 +759,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     sent_at: dict[int, float] = {}
     # unloaded: one pair at a time
     stamps = []
-    for k in range(30):
+    for k in range(UNLOADED_PAIRS):
         stamp = next_stamp()
         sent_at[stamp] = time.monotonic()
         send_pair(client, *pair_msgs(frames[k % len(frames)], stamp))
@@ -757,7 +767,14 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
         stamps.append(stamp)
     unloaded = latency_ms(client, stamps, sent_at)
     p95_unloaded = float(np.percentile(unloaded, 95))
-    rate = 1000.0 / float(np.mean(unloaded))  # pairs/s the node sustains one after another
+    sequential_rate = 1000.0 / float(np.mean(unloaded))  # one pair after another
+    # The rate the node can process: its answers per second while saturated. Its two worker
+    # threads overlap matching and estimation, so this is above the sequential rate.
+    saturating = _paced(client, frames, 3.0 * sequential_rate, SATURATE_S, sent_at)
+    time.sleep(1.0)
+    with client.lock:
+        answer_times = sorted(client.info_time[s] for s in saturating if s in client.info_time)
+    rate = (len(answer_times) - 1) / (answer_times[-1] - answer_times[0])
     before = client.latest_health(after=0.0)
     rss = [round(rss_mb(proc.proc.pid), 1)]
     loaded = _paced(client, frames, 2.0 * rate, OVERLOAD_S, sent_at, proc.proc.pid, rss)
@@ -774,8 +791,14 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     paired = int(mid["synchronized_pairs"]) - int(before["synchronized_pairs"])
     dropped_recovery = int(after["dropped_pairs"]) - int(mid["dropped_pairs"])
     p95_loaded = float(np.percentile(lat_loaded, 95))
+    node_lat = stage_ms(client, loaded, "latency")
+    with client.lock:
+        outside = [  # test -> node's callback, and node's publish -> test's callback
+            1e3 * (client.info_time[s] - sent_at[s]) - node_lat[s] for s in loaded if s in node_lat
+        ]
     figures.add(
         "overload",
+        sequential_rate_hz=round(sequential_rate, 2),
         processing_rate_hz=round(rate, 2),
         input_rate_hz=round(2.0 * rate, 2),
         duration_s=OVERLOAD_S,
@@ -784,8 +807,20 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
         pairs_answered=len(lat_loaded),
         pairs_dropped_counted=dropped,
         node_dropped_pairs_reported=int(mid["dropped_pairs"]),
+        latency_p50_ms_unloaded=round(float(np.median(unloaded)), 1),
         latency_p95_ms_unloaded=round(p95_unloaded, 1),
+        latency_p50_ms_loaded=round(float(np.median(lat_loaded)), 1),
         latency_p95_ms_loaded=round(p95_loaded, 1),
+        latency_p95_ratio=round(p95_loaded / p95_unloaded, 2),
+        # node-side parts of the loaded latency (p50, p95): age of the newest pair when taken
+        # (at most one input period), matching, estimation
+        **{
+            f"node_{key}_ms_loaded": [round(float(np.percentile(v, q)), 1) for q in (50, 95)]
+            for key in ("wait", "features", "match", "estimate")
+            if (v := list(stage_ms(client, loaded, key).values()))
+        },
+        outside_node_ms_loaded=[round(float(np.percentile(outside, q)), 1) for q in (50, 95)],
+        load_average_1min=round(os.getloadavg()[0], 2),
         latency_max_ms_loaded=round(max(lat_loaded), 1),
         rss_trace_mb_every_5s=rss,
         rss_growth_mb=round(rss[-1] - rss[0], 1),

@@ -11,3 +11,7 @@ Layers (each calls only downward):
 """
 
 __version__ = "0.1.0"
+
+from sepfm_ros.kernel_cache import ensure_fresh_cache
+
+ensure_fresh_cache()

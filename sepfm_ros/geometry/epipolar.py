@@ -104,6 +104,22 @@ def msac_kernel(
     return cost, count
 
 
+@numba.njit(cache=True, inline="always")
+def to_unit_norm(G: np.ndarray) -> bool:
+    """Scale G (3, 3) in place to unit Frobenius norm; False (G unchanged) if zero or not finite."""
+    n = 0.0
+    for i in range(3):
+        for j in range(3):
+            n += G[i, j] * G[i, j]
+    if not (np.isfinite(n) and n > 0):
+        return False
+    n = np.sqrt(n)
+    for i in range(3):
+        for j in range(3):
+            G[i, j] /= n
+    return True
+
+
 @numba.njit(cache=True)
 def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
     """(3, 3) -> closest rank-2 matrix (Frobenius), scaled to unit norm.
@@ -140,20 +156,12 @@ def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
         if n < smallest:
             k, smallest = j, n
     G = np.zeros((3, 3))  # (F V with column k zeroed) V^T
-    n = 0.0
     for i in range(3):
         for j in range(3):
-            v = 0.0
             for m in range(3):
                 if m != k:
-                    v += A[i, m] * V[j, m]
-            G[i, j] = v
-            n += v * v
-    if n > 0:
-        n = np.sqrt(n)
-        for i in range(3):
-            for j in range(3):
-                G[i, j] /= n
+                    G[i, j] += A[i, m] * V[j, m]
+    to_unit_norm(G)
     return G
 
 
@@ -165,21 +173,10 @@ def denormalize_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray, out: np.
         for j in range(3):
             for k in range(3):
                 tmp[i, j] += F_n[i, k] * T1[k, j]
-    n = 0.0
     for i in range(3):
         for j in range(3):
-            v = 0.0
-            for k in range(3):
-                v += T2[k, i] * tmp[k, j]
-            out[i, j] = v
-            n += v * v
-    if not (np.isfinite(n) and n > 0):
-        return False
-    n = np.sqrt(n)
-    for i in range(3):
-        for j in range(3):
-            out[i, j] /= n
-    return True
+            out[i, j] = T2[0, i] * tmp[0, j] + T2[1, i] * tmp[1, j] + T2[2, i] * tmp[2, j]
+    return to_unit_norm(out)
 
 
 @numba.njit(cache=True)

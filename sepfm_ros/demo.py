@@ -79,7 +79,7 @@ def replay_through_node(
     debug_image: bool = True,
     progress: bool = True,
     log_path: Path | None = None,
-    startup_timeout_s: float = 60.0,
+    startup_timeout_s: float = 120.0,
     drain_timeout_s: float = 10.0,
     reliable_inputs: bool = True,
 ) -> LiveRun:
@@ -231,6 +231,12 @@ def main(argv: list[str]) -> int:
         check_output_path(out)
         out.mkdir(parents=True)
         isolate_ros_environment()
+        # the node loads the estimator's compiled kernels from the on-disk cache; on the first
+        # run after an install they are compiled here once (tens of seconds), with a message
+        print("preparing the estimator (compiled once after an install) ...", end=" ", flush=True)
+        from sepfm_ros.geometry.compiled import warm_up
+
+        print(f"{warm_up():.1f} s")
         print(
             f"replaying {bag} through the live sepfm node"
             f" (ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']})"

@@ -795,6 +795,8 @@ def main(argv: list[str]) -> int:
     malloc_fixed = configure_malloc()
     dds_profiles = use_node_dds_profiles()
     limit_thread_pools(1)
+    # compile (fresh install) or load the estimator's kernels before the first frame arrives
+    warm_s = warm_up()
     rclpy.init(args=["sepfm", *argv])
     node = None
     try:
@@ -803,9 +805,8 @@ def main(argv: list[str]) -> int:
         except ValueError as err:
             print(f"sepfm_ros node: {err}", flush=True)
             return 2
+        node.get_logger().info(f"estimator kernels ready in {warm_s:.1f} s")
         node.get_logger().info(
-    # compile (fresh install) or load the estimator's kernels before the first frame arrives
-    warm_s = warm_up()
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
             + ("DDS subscriptions with DYNAMIC history" if dds_profiles else "DDS config left")
         )
@@ -814,7 +815,6 @@ def main(argv: list[str]) -> int:
         try:
             executor.spin()
         except (KeyboardInterrupt, ExternalShutdownException):
-        node.get_logger().info(f"estimator kernels ready in {warm_s:.1f} s")
             pass
     finally:
         if node is not None:

@@ -3,7 +3,9 @@
 Points on the line pair are written in control-point coordinates (parameter t along the segment
 between the two control points, i.e. (alpha, beta) = (1 - t, t)); H_e is found by sampling 3
 correspondences (minimal solver) with threshold T1 (px at the working resolution) on the
-symmetric transfer error along the lines, and adaptive termination F(3, r).
+symmetric transfer error along the lines, and adaptive termination F(3, r). The whole RANSAC loop
+(sampling, minimal solve, scoring, local optimisation, stopping) is one compiled kernel,
+:func:`stage1_ransac`, fed uniform numbers drawn from the caller's generator.
 """
 
 from __future__ import annotations
@@ -227,7 +229,9 @@ def fit_line_homography(
         t2 = line_parameter(pts2[support], ctrl2)
         len2 = math.hypot(*(ctrl2[1] - ctrl2[0])) * scale2
         uniforms = rng.random((max_samples, 3))
-        h, found, n_hyp = stage1_ransac(t1, t2, len1, len2, threshold, confidence, uniforms)
+        h, found, n_hyp = stage1_ransac(
+            t1, t2, len1, len2, float(threshold), float(confidence), uniforms
+        )
         hyps += int(n_hyp)
         if not found:
             continue

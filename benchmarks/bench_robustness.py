@@ -1,6 +1,6 @@
 """Robustness report (issue 6): runs the robustness tests and writes their figures as Markdown.
 
-    python benchmarks/bench_robustness.py [--fuzz-raw 7000] [--fuzz-compressed 3000]
+    python benchmarks/bench_robustness.py [--fuzz-raw 10000] [--fuzz-compressed 3000]
         [--overload-s 60] [--kill-trials 20] [--out docs/robustness.md]
 
 The default sizes are the issue's and the same as the default test run (CI runs these tests in
@@ -60,7 +60,7 @@ def render(figures: dict, header: str) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    p.add_argument("--fuzz-raw", type=int, default=7000)
+    p.add_argument("--fuzz-raw", type=int, default=10000)
     p.add_argument("--fuzz-compressed", type=int, default=3000)
     p.add_argument("--overload-s", type=float, default=60.0)
     p.add_argument("--kill-trials", type=int, default=20)
@@ -77,6 +77,7 @@ def main(argv: list[str] | None = None) -> int:
             SEPFM_KILL_TRIALS=str(args.kill_trials),
         )
         t0 = time.monotonic()
+        load_before = os.getloadavg()[0]
         # the degeneracy test prints its counts; capture them from pytest's output
         res = subprocess.run(
             [sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider", *TESTS],
@@ -98,7 +99,8 @@ def main(argv: list[str] | None = None) -> int:
     header = (
         f"Produced by `python benchmarks/bench_robustness.py` at commit {commit or '?'} "
         f"on {platform.node()} "
-        f"({os.cpu_count()} CPUs) in {elapsed:.0f} s; pytest: {summary}. "
+        f"({os.cpu_count()} CPUs) in {elapsed:.0f} s, load average (1 min) {load_before:.2f} "
+        f"before and {os.getloadavg()[0]:.2f} after; pytest: {summary}. "
         "Sizes: "
         f"{args.fuzz_raw} + {args.fuzz_compressed} malformed messages, {args.overload_s:g} s "
         f"overload, {args.kill_trials} SIGKILL trials. Memory is the node process's resident set "

@@ -55,9 +55,9 @@ from sepfm_ros.synthetic.sequences import stereo_sequence, street_scene  # noqa:
 
 SEED = 20261122
 SIZE = (320, 240)  # small frames keep the suite fast; the node's work per pair is the same kind
-# Sizes of the issue (10,000 malformed messages, 60 s overload); benchmarks/bench_robustness.py
-# can scale them through the environment.
-FUZZ_RAW = int(os.environ.get("SEPFM_FUZZ_RAW", 7000))  # malformed sensor_msgs/Image messages
+# Sizes of the issue (10,000 malformed messages to one node, 60 s overload);
+# benchmarks/bench_robustness.py can scale them through the environment.
+FUZZ_RAW = int(os.environ.get("SEPFM_FUZZ_RAW", 10000))  # malformed sensor_msgs/Image messages
 FUZZ_COMPRESSED = int(os.environ.get("SEPFM_FUZZ_COMPRESSED", 3000))  # ... CompressedImage
 VALID_EVERY = 100  # one valid pair after this many malformed messages
 FUZZ_RATE_HZ = float(os.environ.get("SEPFM_FUZZ_RATE_HZ", 400.0))  # malformed messages/s
@@ -774,7 +774,9 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     time.sleep(1.0)
     with client.lock:
         answer_times = sorted(client.info_time[s] for s in saturating if s in client.info_time)
-    rate = (len(answer_times) - 1) / (answer_times[-1] - answer_times[0])
+    saturated_rate = (len(answer_times) - 1) / (answer_times[-1] - answer_times[0])
+    # below the sequential rate only when something else took the cores meanwhile
+    rate = max(saturated_rate, sequential_rate)
     before = client.latest_health(after=0.0)
     rss = [round(rss_mb(proc.proc.pid), 1)]
     loaded = _paced(client, frames, 2.0 * rate, OVERLOAD_S, sent_at, proc.proc.pid, rss)
@@ -799,6 +801,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     figures.add(
         "overload",
         sequential_rate_hz=round(sequential_rate, 2),
+        saturated_rate_hz=round(saturated_rate, 2),
         processing_rate_hz=round(rate, 2),
         input_rate_hz=round(2.0 * rate, 2),
         duration_s=OVERLOAD_S,
@@ -812,12 +815,13 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
         latency_p50_ms_loaded=round(float(np.median(lat_loaded)), 1),
         latency_p95_ms_loaded=round(p95_loaded, 1),
         latency_p95_ratio=round(p95_loaded / p95_unloaded, 2),
-        # node-side parts of the loaded latency (p50, p95): age of the newest pair when taken
-        # (at most one input period), matching, estimation
+        # node-side parts of the latency (p50, p95): age of the newest pair when taken (at most
+        # one input period under load), feature detection, matching, estimation
         **{
-            f"node_{key}_ms_loaded": [round(float(np.percentile(v, q)), 1) for q in (50, 95)]
+            f"node_{key}_ms_{phase}": [round(float(np.percentile(v, q)), 1) for q in (50, 95)]
             for key in ("wait", "features", "match", "estimate")
-            if (v := list(stage_ms(client, loaded, key).values()))
+            for phase, ss in (("unloaded", stamps), ("loaded", loaded))
+            if (v := list(stage_ms(client, ss, key).values()))
         },
         outside_node_ms_loaded=[round(float(np.percentile(outside, q)), 1) for q in (50, 95)],
         load_average_1min=round(os.getloadavg()[0], 2),
@@ -831,9 +835,12 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     )
     assert proc.proc.poll() is None
     assert rss[-1] - rss[0] < RSS_LIMIT_MB
-    # Issue 6 asks for p95_loaded < 2 x p95_unloaded. Measured 1.65x and 2.14x in two runs on
-    # idle 2-core machines: the node, its executor and the 2x sender share the two cores, so the
-    # 2x bound is not reliably met (issue 6 stays open for it; both figures are printed above).
+    # Issue 6 asks for p95_loaded < 2 x p95_unloaded. Not reliably met on 2 cores: at twice the
+    # measured processing rate the ratio was 0.96-2.82 over 10 runs (2.2 and 2.8 among them).
+    # The node-side figures above say why: under load both worker stages run concurrently and
+    # each is ~1.5-2x slower than alone (feature detection, estimation: the two workers, the
+    # executor and the sender share two cores and the GIL), plus the newest pair's age (at most
+    # one input period); DDS/executor queueing before the callback is small (outside_node).
     # Asserted here: latency stays bounded under overload (no queueing: a queue would grow
     # without bound over the 60 s), within 3x the unloaded p95.
     assert p95_loaded < 3.0 * p95_unloaded

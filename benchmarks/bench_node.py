@@ -3,10 +3,13 @@
     python benchmarks/bench_node.py [--seconds 10] [--rate 30] [--features orb]
         [--max-features 1000] [--method sep5] [--scenes NAME ...]
 
-For each scene (templeRing 640x480: consecutive views as a left/right pair; KITTI stereo
-1241x376) it prints:
+For each scene it prints (templeRing 640x480 in motion mode: the 47 views of the ring as one
+image stream, F between consecutive views, each frame detected once; KITTI stereo 1241x376:
+left/right pairs; templeRing stereo: consecutive views sent as left/right pairs, both detected
+every time):
 
-- ``pipeline``: the Pipeline called directly on decoded images (no ROS), pairs/s and per-stage ms;
+- ``pipeline``: the Pipeline called directly on decoded images (no ROS, the node's default
+  config; in motion mode features cached per frame as the node does), pairs/s and per-stage ms;
 - ``pipeline 2 threads``: the same, matching pair n+1 on a second thread while pair n is
   estimated, as the node does (the most the node could reach without ROS);
 - ``node @R Hz``: the node subprocess fed pairs at R pairs/s over DDS for the given time:
@@ -41,15 +44,27 @@ import numpy as np
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
+# scene -> (node mode, images): motion = one stream of frames (F between consecutive frames; the
+# templeRing views form a ring, so the last view and the first are neighbours too); stereo =
+# (left, right) pairs
 SCENES = {
-    "templeRing 640x480": [
-        (f"templeRing/templeR{k:04d}.png", f"templeRing/templeR{k + 1:04d}.png")
-        for k in range(1, 12)
-    ],
-    "KITTI stereo 1241x376": [
-        (f"kitti_seq2/left/{k:06d}.png", f"kitti_seq2/right/{k:06d}.png") for k in range(0, 11)
-    ],
+    "templeRing 640x480 motion": (
+        "motion",
+        [f"templeRing/templeR{k:04d}.png" for k in range(1, 48)],
+    ),
+    "KITTI stereo 1241x376": (
+        "stereo",
+        [(f"kitti_seq2/left/{k:06d}.png", f"kitti_seq2/right/{k:06d}.png") for k in range(0, 11)],
+    ),
+    "templeRing 640x480 stereo": (
+        "stereo",
+        [
+            (f"templeRing/templeR{k:04d}.png", f"templeRing/templeR{k + 1:04d}.png")
+            for k in range(1, 12)
+        ],
+    ),
 }
+DEFAULT_SCENES = ("templeRing 640x480 motion", "KITTI stereo 1241x376")
 STAGES = ("decode", "features", "match", "lines", "stage1", "stage2", "refine", "estimate")
 STAGES += ("queue", "publish", "total")
 
@@ -72,22 +87,41 @@ def cpu_seconds(pid: int | None = None) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def bench_pipeline(pairs, args) -> None:
-    from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
-    from sepfm_ros.ros.node import limit_thread_pools
+def node_values(args) -> dict:
+    """The node's parameter values for this run: its defaults with the command-line changes."""
+    from sepfm_ros.ros.node import PARAMS
+
+    values = {name: spec.default for name, spec in PARAMS.items()}
+    values.update(features=args.features, max_features=args.max_features, method=args.method)
+    for item in args.param:
+        name, _, text = item.partition(":=")
+        default = PARAMS[name].default
+        values[name] = type(default)(float(text)) if isinstance(default, int | float) else text
+    return values
+
+
+def pipeline_steps(mode: str, images: list) -> list[tuple]:
+    """One loop of (image_a, image_b, key_a, key_b) as the node sees them (keys = frame ids)."""
+    if mode == "stereo":
+        return [(a, b, None, None) for a, b in images]
+    n = len(images)
+    return [(images[k], images[(k + 1) % n], k, (k + 1) % n) for k in range(n)]
+
+
+def bench_pipeline(mode, images, args) -> None:
+    from sepfm_ros.pipeline.pipeline import Pipeline
+    from sepfm_ros.ros.node import limit_thread_pools, pipeline_config
 
     limit_thread_pools(1)  # as in the node
-    pipeline = Pipeline(
-        PipelineConfig(features=args.features, max_features=args.max_features, method=args.method)
-    )
+    pipeline = Pipeline(pipeline_config(node_values(args)), cache_size=8)
+    steps = pipeline_steps(mode, images)
     cpu0 = cpu_seconds()
     per_stage: dict[str, list[float]] = defaultdict(list)
     totals = []
     deadline = time.monotonic() + args.seconds
     n = 0
     while time.monotonic() < deadline:
-        a, b = pairs[n % len(pairs)]
-        result = pipeline.process(a, b)
+        result = pipeline.process(*steps[n % len(steps)])
         for stage, ms in result.timings_ms.items():
             per_stage[stage].append(ms)
         totals.append(result.timings_ms["total"])
@@ -98,10 +132,10 @@ def bench_pipeline(pairs, args) -> None:
         f"  CPU {(cpu_seconds() - cpu0) * 1e3 / n:.1f} ms/pair"
     )
     print(f"      stages ms: {stage_line(per_stage)}")
-    bench_pipeline_threaded(pipeline, pairs, args)
+    bench_pipeline_threaded(pipeline, steps, args)
 
 
-def bench_pipeline_threaded(pipeline, pairs, args) -> None:
+def bench_pipeline_threaded(pipeline, steps, args) -> None:
     """Match pair n+1 on a second thread while pair n is estimated (the node's two stages)."""
     from concurrent.futures import ThreadPoolExecutor
 
@@ -110,10 +144,10 @@ def bench_pipeline_threaded(pipeline, pairs, args) -> None:
     deadline = time.monotonic() + args.seconds
     n = 0
     with ThreadPoolExecutor(1) as matcher:
-        pending = matcher.submit(pipeline.match, *pairs[0])
+        pending = matcher.submit(pipeline.match, *steps[0])
         while time.monotonic() < deadline:
             matched = pending.result()
-            pending = matcher.submit(pipeline.match, *pairs[(n + 1) % len(pairs)])
+            pending = matcher.submit(pipeline.match, *steps[(n + 1) % len(steps)])
             pipeline.estimate(matched)
             n += 1
         pending.result()
@@ -125,9 +159,9 @@ def bench_pipeline_threaded(pipeline, pairs, args) -> None:
 
 
 class Feeder:
-    """Test-side rclpy node: publishes pairs, collects ~/estimate_info."""
+    """Test-side rclpy node: publishes pairs (stereo) or frames (motion), collects answers."""
 
-    def __init__(self, node_name: str) -> None:
+    def __init__(self, node_name: str, mode: str) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
@@ -139,8 +173,11 @@ class Feeder:
         rclpy.init(context=self.context)
         self.node = rclpy.create_node("sepfm_bench", context=self.context)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.left = self.node.create_publisher(Image, "/bench/left/image_raw", qos)
-        self.right = self.node.create_publisher(Image, "/bench/right/image_raw", qos)
+        topics = ("left", "right") if mode == "stereo" else ("",)
+        self.pubs = [
+            self.node.create_publisher(Image, f"/bench/{t}{'/' if t else ''}image_raw", qos)
+            for t in topics
+        ]
         self.lock = threading.Lock()
         self.answers: dict[int, tuple[float, dict[str, str]]] = {}
         self.node.create_subscription(
@@ -167,18 +204,27 @@ class Feeder:
     def wait_connected(self, timeout=30.0):
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
-            if self.left.get_subscription_count() and self.right.get_subscription_count():
+            if all(p.get_subscription_count() for p in self.pubs):
                 time.sleep(0.5)
                 return
             time.sleep(0.05)
         raise RuntimeError("node did not subscribe")
 
     def send(self, msgs, stamp: int) -> None:
-        left, right = msgs
-        for msg in (left, right):
+        """Publish one pair (stereo) or one frame (motion) under ``stamp``."""
+        for msg in msgs:
             msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(stamp, 10**9)
-        self.left.publish(left)
-        self.right.publish(right)
+        for pub, msg in zip(self.pubs, msgs, strict=True):
+            pub.publish(msg)
+
+    def wait_answer(self, stamp: int, timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self.lock:
+                if stamp in self.answers:
+                    return True
+            time.sleep(0.0005)
+        return False
 
     def close(self):
         self.executor.shutdown()
@@ -210,28 +256,35 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s):
     print(f"      stages ms: {stage_line(per_stage)}")
 
 
-def bench_node(pairs, args, name: str) -> None:
+def bench_node(mode, images, args) -> None:
     from sepfm_ros.ros.image_conversion import numpy_to_image
 
     node_name = "sepfm_bench_node"
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={node_name}"]
-    cmd += ["-r", "left/image_raw:=/bench/left/image_raw"]
-    cmd += ["-r", "right/image_raw:=/bench/right/image_raw"]
+    cmd += ["-p", f"mode:={mode}"]
+    topics = ("left/image_raw", "right/image_raw") if mode == "stereo" else ("image_raw",)
+    for topic in topics:
+        cmd += ["-r", f"{topic}:=/bench/{topic}"]
+        cmd += ["-p", f"qos_overrides./bench/{topic}.subscription.reliability:=reliable"]
     cmd += ["-p", f"features:={args.features}", "-p", f"max_features:={args.max_features}"]
     cmd += ["-p", f"method:={args.method}"]
-    for side in ("left", "right"):
-        cmd += ["-p", f"qos_overrides./bench/{side}/image_raw.subscription.reliability:=reliable"]
+    for item in args.param:
+        cmd += ["-p", item]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
-    feeder = Feeder(node_name)
+    feeder = Feeder(node_name, mode)
     try:
         feeder.wait_connected()
-        msgs = [(numpy_to_image(a, "mono8"), numpy_to_image(b, "mono8")) for a, b in pairs]
-        # warm-up
-        for k in range(3):
+        if mode == "stereo":
+            msgs = [(numpy_to_image(a, "mono8"), numpy_to_image(b, "mono8")) for a, b in images]
+        else:
+            msgs = [(numpy_to_image(a, "mono8"),) for a in images]
+        # warm-up (compiles the estimator's kernels when numba's cache is cold): until answered
+        for k in range(4):
             stamp = time.time_ns()
             feeder.send(msgs[k % len(msgs)], stamp)
-            time.sleep(0.3)
-        # paced at args.rate pairs/s
+            if not feeder.wait_answer(stamp, 300.0) and k:
+                raise RuntimeError("the node does not answer")
+        # paced at args.rate pairs/s (motion mode: frames/s, one pair per frame)
         cpu0 = cpu_seconds(proc.pid)
         sent = []
         period = 1.0 / args.rate
@@ -250,18 +303,12 @@ def bench_node(pairs, args, name: str) -> None:
         cpu0 = cpu_seconds(proc.pid)
         sent = []
         start = time.monotonic()
-        k = 0
         while time.monotonic() - start < args.seconds:
             stamp = time.time_ns()
             feeder.send(msgs[k % len(msgs)], stamp)
             sent.append(stamp)
             k += 1
-            deadline = time.monotonic() + 5.0
-            while time.monotonic() < deadline:
-                with feeder.lock:
-                    if stamp in feeder.answers:
-                        break
-                time.sleep(0.0005)
+            feeder.wait_answer(stamp, 5.0)
         elapsed = time.monotonic() - start
         cpu_s = cpu_seconds(proc.pid) - cpu0
         summarize("node closed loop", feeder, sent, elapsed, cpu_s)
@@ -278,7 +325,14 @@ def main() -> int:
     parser.add_argument("--features", default="orb")
     parser.add_argument("--max-features", type=int, default=1000)
     parser.add_argument("--method", default="sep5")
-    parser.add_argument("--scenes", nargs="*", default=list(SCENES))
+    parser.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="NAME:=VALUE",
+        help="another node parameter (numeric or string), also used by the pipeline runs",
+    )
+    parser.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES), choices=SCENES)
     args = parser.parse_args()
     if not DATA.is_dir():
         print(f"shared data not found at {DATA}", file=sys.stderr)
@@ -286,17 +340,23 @@ def main() -> int:
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
     print(
         f"method {args.method}, features {args.features}, max_features {args.max_features},"
-        f" {os.cpu_count()} CPUs, load average {os.getloadavg()[0]:.1f},"
-        f" ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']}; stage times are means"
+        f" {' '.join(args.param)} {os.cpu_count()} CPUs, load average"
+        f" {os.getloadavg()[0]:.1f}, ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']};"
+        " stage times are means"
     )
+
+    def read(name):
+        return cv2.imread(str(DATA / name), cv2.IMREAD_GRAYSCALE)
+
     for name in args.scenes:
-        pairs = [
-            (cv2.imread(str(DATA / a), cv2.IMREAD_GRAYSCALE), cv2.imread(str(DATA / b), 0))
-            for a, b in SCENES[name]
-        ]
+        mode, names = SCENES[name]
+        if mode == "stereo":
+            images = [(read(a), read(b)) for a, b in names]
+        else:
+            images = [read(a) for a in names]
         print(f"{name}:")
-        bench_pipeline(pairs, args)
-        bench_node(pairs, args, name)
+        bench_pipeline(mode, images, args)
+        bench_node(mode, images, args)
         print(f"  (load average now {os.getloadavg()[0]:.1f})")
     return 0
 

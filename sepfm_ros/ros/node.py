@@ -94,6 +94,8 @@ MODES = ("stereo", "motion")
 TRANSPORTS = ("raw", "compressed")
 # Estimator option that the hough_width_px parameter sets (0 = leave the estimator's default).
 HOUGH_WIDTH_OPTION = "hough_width"
+# Estimator option that the max_samples parameter sets.
+MAX_SAMPLES_OPTION = "max_samples"
 
 
 @dataclass(frozen=True)
@@ -135,6 +137,13 @@ PARAMS: dict[str, ParamSpec] = {
         1.0, "inlier threshold, symmetric epipolar distance, px", 0.01, 100.0
     ),
     "confidence": ParamSpec(0.99, "RANSAC confidence", 0.5, 0.999999),
+    "max_samples": ParamSpec(
+        1000,
+        "cap on the estimator's RANSAC samples per pair (bounds its time on a pair without"
+        " consensus; ample for ORB matches of real pairs)",
+        10,
+        1_000_000,
+    ),
     "hough_width_px": ParamSpec(
         0, "working width of the line-pair (Hough) search, px (0 = estimator default)", 0, 8192
     ),
@@ -223,7 +232,7 @@ def parameter_error(name: str, value: Any) -> str | None:
 
 def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     """Node parameter values -> PipelineConfig (ValueError when invalid)."""
-    options = {}
+    options = {MAX_SAMPLES_OPTION: int(values.get("max_samples", PARAMS["max_samples"].default))}
     if int(values.get("hough_width_px", 0)) > 0:
         options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
     kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}

@@ -113,7 +113,8 @@ def bench_pipeline(mode, images, args) -> None:
     from sepfm_ros.ros.node import limit_thread_pools, pipeline_config
 
     limit_thread_pools(1)  # as in the node
-    pipeline = Pipeline(pipeline_config(node_values(args)), cache_size=8)
+    # as in the node: features cached per frame, the two images of a stereo pair detected at once
+    pipeline = Pipeline(pipeline_config(node_values(args)), cache_size=8, parallel_detect=True)
     steps = pipeline_steps(mode, images)
     cpu0 = cpu_seconds()
     per_stage: dict[str, list[float]] = defaultdict(list)

@@ -201,3 +201,23 @@ def test_match_and_estimate_on_two_threads_equal_process(shared_data):
         np.testing.assert_array_equal(e.estimate.inliers, g.estimate.inliers)
         np.testing.assert_array_equal(e.matches.pts_b, g.matches.pts_b)
         assert e.estimate.hypotheses == g.estimate.hypotheses
+
+
+def test_parallel_detection_equals_sequential(shared_data):
+    """parallel_detect (the node's: image b detected on a helper thread) changes no result."""
+    names = sorted(PAIRS)
+    pairs = [tuple(load(shared_data, p) for p in PAIRS[n]) for n in names]
+    config = PipelineConfig(seed=3)
+    sequential, parallel = Pipeline(config), Pipeline(config, parallel_detect=True)
+    for k, (a, b) in enumerate(pairs * 2):
+        keys = (None, None) if k < len(pairs) else (("a", k % len(pairs)), ("b", k % len(pairs)))
+        e, g = sequential.process(a, b, *keys), parallel.process(a, b, *keys)
+        np.testing.assert_array_equal(e.matches.pts_a, g.matches.pts_a)
+        np.testing.assert_array_equal(e.matches.pts_b, g.matches.pts_b)
+        np.testing.assert_array_equal(e.estimate.F, g.estimate.F)
+    assert parallel.images_detected == sequential.images_detected == 4 * len(pairs)
+    parallel.update(max_features=500)  # the helper's detector follows the config
+    np.testing.assert_array_equal(
+        parallel.process(*pairs[0]).matches.pts_b,
+        Pipeline(PipelineConfig(seed=3, max_features=500)).process(*pairs[0]).matches.pts_b,
+    )

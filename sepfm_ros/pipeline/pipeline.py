@@ -26,6 +26,7 @@ from __future__ import annotations
 import time
 from collections import OrderedDict
 from collections.abc import Hashable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from functools import cache
 from typing import Any
@@ -163,15 +164,29 @@ def _ms(t0: float) -> float:
 
 
 class Pipeline:
-    """Two images in, matches and F out. Not thread-safe: one pipeline per worker thread."""
+    """Two images in, matches and F out. Not thread-safe: one pipeline per worker thread.
 
-    def __init__(self, config: PipelineConfig | None = None, cache_size: int = 4) -> None:
+    With ``parallel_detect`` a pair whose two images both need detection (stereo) has image b
+    detected on a helper thread (own detector; OpenCV releases the GIL) while image a is
+    detected on the caller's thread: the same features, in about half the time on two cores.
+    """
+
+    def __init__(
+        self,
+        config: PipelineConfig | None = None,
+        cache_size: int = 4,
+        parallel_detect: bool = False,
+    ) -> None:
         self._cache: OrderedDict[Hashable, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._cache_size = int(cache_size)
         self.images_detected = 0  # images whose features were computed
         self.images_cached = 0  # images whose features came from the cache
         self._config = PipelineConfig()
         self._detector = None
+        self._detector_b = None  # the helper thread's detector (parallel_detect)
+        self._helper = (
+            ThreadPoolExecutor(1, thread_name_prefix="sepfm-detect") if parallel_detect else None
+        )
         self.configure(config or PipelineConfig())
 
     @property
@@ -186,6 +201,8 @@ class Pipeline:
             old.max_features,
         ):
             self._detector = make_detector(config.features, config.max_features)
+            if self._helper is not None:
+                self._detector_b = make_detector(config.features, config.max_features)
             self._cache.clear()
         self._config = config
 
@@ -195,20 +212,43 @@ class Pipeline:
         self.configure(config)
         return config
 
-    def _features(
-        self, image: np.ndarray, key: Hashable | None
-    ) -> tuple[np.ndarray, np.ndarray | None]:
+    def _cached(self, key: Hashable | None) -> tuple[np.ndarray, np.ndarray | None] | None:
         if key is not None and key in self._cache:
             self._cache.move_to_end(key)
             self.images_cached += 1
             return self._cache[key]
-        feats = detect(image, self._detector)
+        return None
+
+    def _store(
+        self, key: Hashable | None, feats: tuple[np.ndarray, np.ndarray | None]
+    ) -> tuple[np.ndarray, np.ndarray | None]:
         self.images_detected += 1
         if key is not None and self._cache_size > 0:
             self._cache[key] = feats
             while len(self._cache) > self._cache_size:
                 self._cache.popitem(last=False)
         return feats
+
+    def _features(
+        self, image: np.ndarray, key: Hashable | None
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        cached = self._cached(key)
+        return cached if cached is not None else self._store(key, detect(image, self._detector))
+
+    def _pair_features(
+        self,
+        image_a: np.ndarray,
+        image_b: np.ndarray,
+        key_a: Hashable | None,
+        key_b: Hashable | None,
+    ) -> tuple[tuple[np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray | None]]:
+        """Features of both images: cached, or detected (b on the helper thread if any)."""
+        cached = key_a in self._cache or key_b in self._cache
+        if self._helper is None or cached or (key_a is not None and key_a == key_b):
+            return self._features(image_a, key_a), self._features(image_b, key_b)
+        pending_b = self._helper.submit(detect, image_b, self._detector_b)
+        feats_a = self._store(key_a, detect(image_a, self._detector))
+        return feats_a, self._store(key_b, pending_b.result())
 
     def match(
         self,
@@ -230,8 +270,7 @@ class Pipeline:
         size_b = (int(image_b.shape[1]), int(image_b.shape[0]))
 
         t0 = time.perf_counter()
-        pts_a, desc_a = self._features(image_a, key_a)
-        pts_b, desc_b = self._features(image_b, key_b)
+        (pts_a, desc_a), (pts_b, desc_b) = self._pair_features(image_a, image_b, key_a, key_b)
         timings["features"] = _ms(t0)
 
         t0 = time.perf_counter()

@@ -9,10 +9,12 @@ dropped, so nothing queues without bound. Two worker threads then run the
 :class:`~sepfm_ros.pipeline.pipeline.Pipeline` one pair apart, like a two-stage assembly line:
 
 - ``sepfm-match`` takes the newest pair from the input slot, decodes the images, detects features
-  (each frame once: cached by stamp) and matches them (:meth:`Pipeline.match`, OpenCV code that
-  releases the GIL), and hands the matches over in a one-element slot;
-- ``sepfm-estimate`` runs the estimator on them (:meth:`Pipeline.estimate`, mostly Python) and
-  publishes.
+  (each frame once: cached by stamp; in stereo mode the right image on a helper thread
+  ``sepfm-detect`` at the same time) and matches them (:meth:`Pipeline.match`, OpenCV and
+  compiled code that release the GIL), and hands the matches over in a one-element slot;
+- ``sepfm-estimate`` runs the estimator on them (:meth:`Pipeline.estimate`) and publishes; the
+  ``max_samples`` parameter caps its RANSAC samples, so a pair without consensus (a few dozen
+  matches, most of them wrong) cannot hold it for long.
 
 The match thread starts a pair only when the hand-over slot is empty, so it runs at most one pair
 ahead of the estimator, and it starts when the estimator's expected remaining time (recent medians
@@ -317,7 +319,7 @@ class SepfmNode(Node):
         self._estimate_s = RecentMedian()
         self._stop = False
         self._pending_config: PipelineConfig | None = None
-        self._pipeline = Pipeline(pipeline_config(values), cache_size=8)
+        self._pipeline = Pipeline(pipeline_config(values), cache_size=8, parallel_detect=True)
         self._epipolar_lines = int(values["debug_epipolar_lines"])
         self._publish_unreliable = bool(values["publish_unreliable"])
         self._sync: ApproximateTimeSync[tuple[Any, float]] = ApproximateTimeSync(

@@ -173,3 +173,19 @@ def test_estimate_exposes_H_e_consistent_with_line_inliers():
     # transfer error along line 2 in pixels
     err = np.abs(transfer(est.H_e, t1) - t2) * np.linalg.norm(c2[1] - c2[0])
     assert err.max() < 1e-6
+
+
+def test_duplicate_check_exact_on_ties():
+    """Matches sharing coordinates are not duplicates unless all four agree; real ones are named."""
+    rng = np.random.default_rng(4)
+    p1 = rng.uniform(0, 640, (60, 2)).round()  # many equal u values among the rows ...
+    p1[:, 0] = p1[:, 0] % 5  # ... in runs of about 12
+    p2 = rng.uniform(0, 640, (60, 2))
+    p2[10] = p2[3]  # same point in image 2 only: not a duplicate correspondence
+    est = estimate_fundamental(p1, p2, (640, 480), method="ransac8", seed=0)
+    assert est is not None
+    p1[41], p2[41] = p1[17], p2[17]
+    p1[50], p2[50] = p1[17], p2[17]
+    with pytest.raises(ValueError, match=r"2 duplicate correspondences \(e\.g\. the matches at "
+                       r"indices (17 and 41|17 and 50|41 and 50) are"):  # fmt: skip
+        estimate_fundamental(p1, p2, (640, 480), method="ransac8", seed=0)

@@ -263,16 +263,31 @@ def fundamental_from_cameras(P1: np.ndarray, P2: np.ndarray) -> np.ndarray:
     return normalize_fundamental(F)
 
 
+@numba.njit(cache=True)
+def hartley_kernel(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(N, 2) pixels (N >= 1) -> (Hartley's T (3, 3), the points normalised by T (N, 2))."""
+    n = pts.shape[0]
+    cu, cv = pts[:, 0].mean(), pts[:, 1].mean()
+    d = 0.0
+    for i in range(n):
+        d += np.hypot(pts[i, 0] - cu, pts[i, 1] - cv)
+    d /= n
+    s = np.sqrt(2.0) / d if d > 0 else 1.0
+    T = np.array([[s, 0.0, -s * cu], [0.0, s, -s * cv], [0.0, 0.0, 1.0]])
+    x = np.empty((n, 2))
+    for i in range(n):
+        x[i, 0] = s * (pts[i, 0] - cu)
+        x[i, 1] = s * (pts[i, 1] - cv)
+    return T, x
+
+
 def normalization_transform(pts: np.ndarray) -> np.ndarray:
     """Hartley's similarity T (3, 3): centroid to origin, mean distance to the origin sqrt(2).
 
     Args:
         pts: (N, 2) pixel coordinates, N >= 1.
     """
-    c = pts.mean(axis=0)
-    d = np.sqrt(((pts - c) ** 2).sum(axis=1)).mean()
-    s = np.sqrt(2.0) / d if d > 0 else 1.0
-    return np.array([[s, 0.0, -s * c[0]], [0.0, s, -s * c[1]], [0.0, 0.0, 1.0]])
+    return hartley_kernel(np.ascontiguousarray(pts, dtype=np.float64))[0]
 
 
 def apply_transform(T: np.ndarray, pts: np.ndarray) -> np.ndarray:

@@ -202,7 +202,7 @@ class Feeder:
         with self.lock:
             self.answers[stamp] = (now, values)
 
-    def wait_connected(self, timeout=30.0):
+    def wait_connected(self, timeout=240.0):  # a cold numba cache: the node compiles first
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if all(p.get_subscription_count() for p in self.pubs):

@@ -279,12 +279,16 @@ def bench_node(mode, images, args) -> None:
             msgs = [(numpy_to_image(a, "mono8"), numpy_to_image(b, "mono8")) for a, b in images]
         else:
             msgs = [(numpy_to_image(a, "mono8"),) for a in images]
-        # warm-up (compiles the estimator's kernels when numba's cache is cold): until answered
-        for k in range(4):
-            stamp = time.time_ns()
-            feeder.send(msgs[k % len(msgs)], stamp)
-            if not feeder.wait_answer(stamp, 300.0) and k:
+        # warm-up until 3 answers (motion mode: the first frame has no pair, so no answer); one
+        # frame counter throughout, so that a motion stream always pairs neighbouring views
+        frame, answered, deadline = 0, 0, time.monotonic() + 300.0
+        while answered < 3:
+            if time.monotonic() > deadline:
                 raise RuntimeError("the node does not answer")
+            stamp = time.time_ns()
+            feeder.send(msgs[frame % len(msgs)], stamp)
+            frame += 1
+            answered += feeder.wait_answer(stamp, 10.0)
         # paced at args.rate pairs/s (motion mode: frames/s, one pair per frame)
         cpu0 = cpu_seconds(proc.pid)
         sent = []
@@ -295,7 +299,8 @@ def bench_node(mode, images, args) -> None:
             target = start + k * period
             time.sleep(max(0.0, target - time.monotonic()))
             stamp = time.time_ns()
-            feeder.send(msgs[k % len(msgs)], stamp)
+            feeder.send(msgs[frame % len(msgs)], stamp)
+            frame += 1
             sent.append(stamp)
             k += 1
         cpu_s = cpu_seconds(proc.pid) - cpu0
@@ -306,9 +311,9 @@ def bench_node(mode, images, args) -> None:
         start = time.monotonic()
         while time.monotonic() - start < args.seconds:
             stamp = time.time_ns()
-            feeder.send(msgs[k % len(msgs)], stamp)
+            feeder.send(msgs[frame % len(msgs)], stamp)
+            frame += 1
             sent.append(stamp)
-            k += 1
             feeder.wait_answer(stamp, 5.0)
         elapsed = time.monotonic() - start
         cpu_s = cpu_seconds(proc.pid) - cpu0

@@ -127,7 +127,12 @@ def test_ros2_run_node_from_the_ament_prefix_publishes(colcon_install, ros_domai
                 executor.spin_once(timeout_sec=0.1)
         finally:
             proc.send_signal(signal.SIGINT)
-            code = proc.wait(15)
+            try:
+                code = proc.wait(15)
+            except subprocess.TimeoutExpired:  # never leave a node behind
+                proc.kill()
+                proc.wait()
+                raise
             executor.shutdown()
             node.destroy_node()
             rclpy.try_shutdown(context=context)

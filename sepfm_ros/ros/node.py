@@ -34,6 +34,8 @@ after every large product and take it from the match thread.
 from __future__ import annotations
 
 import argparse
+import os
+import signal
 import statistics
 import threading
 import time
@@ -89,6 +91,7 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
+from sepfm_ros.ros.replay import raise_keyboard_interrupt
 from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
 
 NODE_NAME = "sepfm"
@@ -790,6 +793,28 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
+def warm_up_interruptibly() -> float | None:
+    """:func:`warm_up` in a thread, so SIGINT / SIGTERM stop the node while kernels compile.
+
+    numba compiles on: a KeyboardInterrupt raised in the compiling thread is lost. Returns the
+    seconds spent, or None when interrupted (the thread is left to the process's exit).
+    """
+    done: dict[str, float] = {}
+    thread = threading.Thread(
+        target=lambda: done.update(s=warm_up()), name="kernel-warm-up", daemon=True
+    )
+    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    try:
+        thread.start()
+        while thread.is_alive():
+            thread.join(0.1)
+    except KeyboardInterrupt:
+        return None
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+    return done.get("s", 0.0)
+
+
 def main(argv: list[str]) -> int:
     """Run the node until SIGINT/SIGTERM; returns the process exit code."""
     from rclpy.utilities import remove_ros_args
@@ -807,7 +832,10 @@ def main(argv: list[str]) -> int:
     dds_profiles = use_node_dds_profiles()
     limit_thread_pools(1)
     # compile (fresh install) or load the estimator's kernels before the first frame arrives
-    warm_s = warm_up()
+    warm_s = warm_up_interruptibly()
+    if warm_s is None:
+        print("sepfm_ros node: interrupted while preparing the estimator", flush=True)
+        os._exit(0)  # the compiling thread cannot be joined; nothing is open yet
     rclpy.init(args=["sepfm", *argv])
     node = None
     try:

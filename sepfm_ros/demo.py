@@ -234,7 +234,7 @@ def main(argv: list[str]) -> int:
         # the node loads the estimator's compiled kernels from the on-disk cache; on the first
         # run after an install they are compiled here once (tens of seconds), with a message
         print("preparing the estimator (compiled once after an install) ...", end=" ", flush=True)
-        from sepfm_ros.geometry.compiled import warm_up
+        from sepfm_ros.pipeline.compiled import warm_up
 
         print(f"{warm_up():.1f} s")
         print(

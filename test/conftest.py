@@ -35,7 +35,7 @@ def shared_data() -> Path:
 @pytest.fixture(scope="session", autouse=True)
 def compiled_kernels() -> float:
     """Compile or load the estimator's kernels once per session; returns the seconds spent."""
-    from sepfm_ros.geometry.compiled import warm_up
+    from sepfm_ros.pipeline.compiled import warm_up
 
     return warm_up()
 

@@ -65,7 +65,7 @@ from std_msgs.msg import Header
 from threadpoolctl import threadpool_limits
 
 from sepfm_ros.geometry import METHODS
-from sepfm_ros.geometry.compiled import warm_up
+from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig

@@ -292,9 +292,21 @@ class Replayer:
                 clock_thread.join(timeout=1.0)
         return published
 
-    def close(self) -> None:
+    def close(self, ack_timeout_s: float = 5.0) -> None:
+        """Close the bag and the publishers, after the subscribers acknowledged what was sent.
+
+        A reliable publisher destroyed right after its last publish can take unsent samples
+        with it (the last frame of a replay was lost that way under load), so each one first
+        waits (up to ``ack_timeout_s``) until every matched reader has acknowledged its samples.
+        """
+        from rclpy.duration import Duration
+
         self.reader.close()
         for pub in self.publishers.values():
+            try:
+                pub.wait_for_all_acked(Duration(nanoseconds=int(ack_timeout_s * 1e9)))
+            except Exception:  # noqa: BLE001 - best effort: never keep a closing player alive
+                pass
             self.node.destroy_publisher(pub)
 
 

@@ -4,20 +4,13 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
-from sepfm_ros.geometry.epipolar import hartley_kernel, symmetric_epipolar_distance_h
-
-
-@numba.njit(cache=True)
-def _homogeneous_rows(pts: np.ndarray) -> np.ndarray:
-    """(N, 2) pixels -> (3, N) homogeneous pixels, one row per coordinate (for scoring)."""
-    n = pts.shape[0]
-    X = np.empty((3, n))
-    for i in range(n):
-        X[0, i], X[1, i], X[2, i] = pts[i, 0], pts[i, 1], 1.0
-    return X
+from sepfm_ros.geometry.epipolar import (
+    hartley_kernel,
+    homogeneous,
+    symmetric_epipolar_distance_h,
+)
 
 
 @dataclass
@@ -40,7 +33,8 @@ class Correspondences:
         pts2 = np.ascontiguousarray(pts2, dtype=np.float64)
         T1, x1 = hartley_kernel(pts1)
         T2, x2 = hartley_kernel(pts2)
-        X1, X2 = _homogeneous_rows(pts1), _homogeneous_rows(pts2)
+        X1 = np.ascontiguousarray(homogeneous(pts1).T)
+        X2 = np.ascontiguousarray(homogeneous(pts2).T)
         return cls(pts1, pts2, x1, x2, T1, T2, X1, X2)
 
     def distances(self, F: np.ndarray) -> np.ndarray:

@@ -27,14 +27,6 @@ def normalize_fundamental(F: np.ndarray) -> np.ndarray:
     return (flat * sign / np.where(norm == 0, 1.0, norm)).reshape(F.shape)
 
 
-def enforce_rank2(F: np.ndarray) -> np.ndarray:
-    """Closest rank-2 matrix (Frobenius) to F (..., 3, 3) by zeroing the smallest singular value."""
-    U, s, Vt = np.linalg.svd(F)
-    s = s.copy()
-    s[..., 2] = 0.0
-    return (U * s[..., None, :]) @ Vt
-
-
 def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
     """Per-model algebraic residuals and the first two coordinates of the epipolar lines.
 

@@ -62,20 +62,17 @@ def transfer(H: np.ndarray, t: np.ndarray) -> np.ndarray:
     return tp[0] if single else tp
 
 
-def inverse(H: np.ndarray) -> np.ndarray:
-    """Inverse line homographies up to scale (the adjugate), (..., 2, 2) -> (..., 2, 2)."""
-    out = np.empty_like(H)
-    out[..., 0, 0] = H[..., 1, 1]
-    out[..., 0, 1] = -H[..., 0, 1]
-    out[..., 1, 0] = -H[..., 1, 0]
-    out[..., 1, 1] = H[..., 0, 0]
-    return out
-
-
 # --------------------------------------------------------------------------------------------
 # Scalar kernels for the compiled stage-1 loop (line_homography_fit.stage1_ransac).
 # H is held as h = (a, b, c, d) for [[a, b], [c, d]].
 # --------------------------------------------------------------------------------------------
+
+
+@numba.njit(cache=True, inline="always")
+def _row_kernel(t1: float, t2: float, row: np.ndarray) -> None:
+    """Row (4,) of :func:`_rows` for line parameters t1 -> t2 ((alpha, beta) = (1 - t, t))."""
+    a1, b1, a2, b2 = 1.0 - t1, t1, 1.0 - t2, t2
+    row[0], row[1], row[2], row[3] = -b2 * a1, -b2 * b1, a2 * a1, a2 * b1
 
 
 @numba.njit(cache=True)
@@ -87,11 +84,7 @@ def line_homography_3pt_kernel(t1: np.ndarray, t2: np.ndarray, out: np.ndarray) 
     """
     A = np.empty((3, 4))
     for i in range(3):
-        a1, b1, a2, b2 = 1.0 - t1[i], t1[i], 1.0 - t2[i], t2[i]
-        A[i, 0] = -b2 * a1
-        A[i, 1] = -b2 * b1
-        A[i, 2] = a2 * a1
-        A[i, 3] = a2 * b1
+        _row_kernel(t1[i], t2[i], A[i])
     sign = 1.0
     norm = 0.0
     for j in range(4):
@@ -126,11 +119,7 @@ def line_homography_lsq_kernel(t1: np.ndarray, t2: np.ndarray, mask: np.ndarray)
     r = 0
     for i in range(len(t1)):
         if mask[i]:
-            a1, b1, a2, b2 = 1.0 - t1[i], t1[i], 1.0 - t2[i], t2[i]
-            A[r, 0] = -b2 * a1
-            A[r, 1] = -b2 * b1
-            A[r, 2] = a2 * a1
-            A[r, 3] = a2 * b1
+            _row_kernel(t1[i], t2[i], A[r])
             r += 1
     _, _, vt = np.linalg.svd(A, full_matrices=False)
     return vt[3].copy()

@@ -8,6 +8,8 @@ its status, and the evaluation goes on.
 from __future__ import annotations
 
 import math
+import signal
+import threading
 from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 
@@ -181,8 +183,16 @@ def evaluate(
     """
     cfg = config or EvalConfig()
     res = EvalResults(config=cfg, methods=[m.name for m in methods], errors=list(errors))
+    # Ctrl-C sets a flag checked between pairs: a KeyboardInterrupt raised while numba compiles
+    # a kernel is lost, so the default handler alone could let the run go on to the end
+    stop = threading.Event()
+    previous = None
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGINT, lambda signum, frame: stop.set())
     try:
         for pair in pairs:
+            if stop.is_set():
+                raise KeyboardInterrupt
             _evaluate_pair(res, pair, methods, cache, progress)
     except KeyboardInterrupt:
         # keep whole pairs only: drop the runs of the pair that was interrupted
@@ -192,6 +202,9 @@ def evaluate(
             last = res.pairs.pop()["pair"]
             res.runs = [r for r in res.runs if r["pair"] != last]
             res.examples = {k: v for k, v in res.examples.items() if v.pair.pair_id != last}
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGINT, previous)
     return res
 
 

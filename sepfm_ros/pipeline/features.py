@@ -11,6 +11,9 @@ from dataclasses import dataclass
 import cv2
 import numba
 import numpy as np
+from llvmlite import ir
+from numba.core import types
+from numba.core.extending import intrinsic
 
 FEATURES = ("orb", "sift", "akaze")
 
@@ -75,40 +78,57 @@ def detect(image: np.ndarray, detector: cv2.Feature2D) -> tuple[np.ndarray, np.n
     return pts, desc
 
 
-@numba.njit(cache=True, nogil=True)
-def _popcount64(x: np.uint64) -> np.uint64:
-    """Set bits of a 64-bit word (LLVM turns this SWAR idiom into one POPCNT instruction)."""
-    x = x - ((x >> np.uint64(1)) & np.uint64(0x5555555555555555))
-    x = (x & np.uint64(0x3333333333333333)) + ((x >> np.uint64(2)) & np.uint64(0x3333333333333333))
-    x = (x + (x >> np.uint64(4))) & np.uint64(0x0F0F0F0F0F0F0F0F)
-    return (x * np.uint64(0x0101010101010101)) >> np.uint64(56)
+@intrinsic
+def _popcount64(typingctx, x):
+    """Set bits of a uint64 (LLVM's ctpop: one POPCNT, or a vector popcount in a vector loop)."""
+    sig = types.uint64(types.uint64)
+
+    def codegen(context, builder, signature, args):
+        fn = builder.module.declare_intrinsic("llvm.ctpop", [ir.IntType(64)])
+        return builder.call(fn, args)
+
+    return sig, codegen
 
 
 @numba.njit(cache=True, nogil=True)
 def _two_nearest_hamming(
-    words_a: np.ndarray, words_b: np.ndarray
+    words_a: np.ndarray, words_b_t: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Kernel of :func:`_two_nearest_binary` on (Na, W) and (Nb, W) uint64 words, Nb >= 2."""
+    """Kernel of :func:`_two_nearest_binary`: (Na, W) uint64 words of a, (W, Nb) of b, Nb >= 2.
+
+    b is transposed (one row per word) so the distance loop over b runs over contiguous words
+    and LLVM vectorises it (AVX2: four distances per instruction); the scan for the two
+    smallest follows. About 3x faster than one scalar distance at a time.
+    """
     n_a, n_words = words_a.shape
-    n_b = words_b.shape[0]
+    n_b = words_b_t.shape[1]
     i1 = np.empty(n_a, dtype=np.int64)
     i2 = np.empty(n_a, dtype=np.int64)
     d1 = np.empty(n_a, dtype=np.int64)
     d2 = np.empty(n_a, dtype=np.int64)
+    dist = np.empty(n_b, dtype=np.uint64)
+    far = np.uint64(1) << np.uint64(62)
     for i in range(n_a):
-        best, second = np.int64(1) << 62, np.int64(1) << 62
+        a_word = words_a[i, 0]
+        b_words = words_b_t[0]
+        for j in range(n_b):
+            dist[j] = _popcount64(a_word ^ b_words[j])
+        for w in range(1, n_words):
+            a_word = words_a[i, w]
+            b_words = words_b_t[w]
+            for j in range(n_b):
+                dist[j] += _popcount64(a_word ^ b_words[j])
+        best, second = far, far
         j_best, j_second = 0, 0
         for j in range(n_b):
-            d = np.uint64(0)
-            for w in range(n_words):
-                d += _popcount64(words_a[i, w] ^ words_b[j, w])
-            dist = np.int64(d)
+            d = dist[j]
             # strict comparisons: among equal distances the lower index wins both places
-            if dist < best:
-                second, j_second = best, j_best
-                best, j_best = dist, j
-            elif dist < second:
-                second, j_second = dist, j
+            if d < second:
+                if d < best:
+                    second, j_second = best, j_best
+                    best, j_best = d, j
+                else:
+                    second, j_second = d, j
         i1[i], d1[i], i2[i], d2[i] = j_best, best, j_second, second
     return i1, d1, i2, d2
 
@@ -127,9 +147,9 @@ def _two_nearest_binary(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Two nearest b-descriptors of every a-descriptor under the Hamming distance.
 
-    Exact brute force with a POPCNT per 64 bits, compiled (numba) and without the GIL, so the
-    node's estimate thread keeps running meanwhile. Ties go to the lower index, as in OpenCV's
-    brute-force matcher (``BFMatcher.knnMatch``, whose results these equal).
+    Exact brute force with a popcount per 64 bits (vectorised), compiled (numba) and without the
+    GIL, so the node's estimate thread keeps running meanwhile. Ties go to the lower index, as
+    in OpenCV's brute-force matcher (``BFMatcher.knnMatch``, whose results these equal).
 
     Args:
         desc_a: (Na, B) uint8 packed binary descriptors; desc_b: (Nb, B), Nb >= 2.
@@ -138,7 +158,8 @@ def _two_nearest_binary(
         nearest and second-nearest descriptor.
     """
     n_words = -(-desc_a.shape[1] // 8)
-    i1, d1, i2, d2 = _two_nearest_hamming(_as_words(desc_a, n_words), _as_words(desc_b, n_words))
+    words_b_t = np.ascontiguousarray(_as_words(desc_b, n_words).T)
+    i1, d1, i2, d2 = _two_nearest_hamming(_as_words(desc_a, n_words), words_b_t)
     return i1, d1.astype(np.float64), i2, d2.astype(np.float64)
 
 

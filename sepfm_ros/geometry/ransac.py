@@ -151,16 +151,19 @@ def run_ransac(
 
     Arm 0 starts; further arms are pulled from ``arms`` (lazily: an iterator may build each arm
     only when it joins) on the ``race`` schedule and are dropped when their support lags (see
-    :class:`RaceOptions`). The loop stops when the leading arm (the one holding the best model)
-    has drawn F(k, r) samples for the inlier ratio of the best model, or when ``max_samples``
-    samples were drawn in all.
+    :class:`RaceOptions`). The loop stops when the arms that agree with the best model have
+    drawn F(k, r) samples together for the inlier ratio of the best model, or when
+    ``max_samples`` samples were drawn in all. An arm agrees when it holds the best model or its
+    own best support is at least ``race.drop_ratio`` of it: arms whose fixed points are all
+    inliers draw an all-inlier sample at the same rate w^k, so their samples pool (several good
+    line pairs racing would otherwise each draw F(k, r) samples); a lagging arm's do not count.
 
     Args:
         arms: problems to sample (a list or a lazy iterator); all score against the same data.
         rng: the random generator (seeded by the caller).
         confidence: RANSAC confidence p.
         max_samples: cap on the total number of samples over all arms.
-        min_samples: samples the leading arm draws at least before stopping.
+        min_samples: samples drawn at least (by the agreeing arms together) before stopping.
         race: racing options (only used with more than one arm).
         batch: most samples one arm solves and scores in one vectorised call.
         initial: optional (model, cost, count) from an earlier run to start from; it counts as
@@ -209,6 +212,13 @@ def run_ransac(
         if lcost[j] < best_cost:
             best_model, best_cost, best_count, leader = lo[j], float(lcost[j]), int(lcount[j]), a
 
+    def pooled_samples() -> int:
+        """Samples of the leader and of the arms whose best support is near the best model's."""
+        if leader < 0:
+            return 0
+        bar = race.drop_ratio * best_count
+        return sum(n for a, n in enumerate(samples) if a == leader or arm_best[a] >= bar)
+
     if initial is not None and pool:
         best_model, best_cost, best_count = initial
         leader = 0
@@ -225,8 +235,11 @@ def run_ransac(
                 arm.sample_size, max(best_count, 0), arm.n, confidence, max_samples
             )
             need = max(need, min_samples)
+            done = pooled_samples()
+            if leader >= 0 and done >= need:
+                break
             # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
-            b = int(np.clip(need - samples[a], 1, min(batch, max(1, samples[a]))))
+            b = int(np.clip(need - done, 1, min(batch, max(1, samples[a]))))
             b = min(b, max_samples - total)
             if b <= 0:
                 continue
@@ -259,11 +272,11 @@ def run_ransac(
             elif extra_lo < max_extra_lo and count[i] >= extra_lo_ratio * best_raw_count:
                 extra_lo += 1
                 local_optimization(a, models[i])
-        # adaptive stopping on the leading arm
+        # adaptive stopping on the samples of the arms that agree with the best model
         if leader >= 0:
             arm = pool[leader]
             need = _trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
-            if samples[leader] >= max(need, min_samples):
+            if pooled_samples() >= max(need, min_samples):
                 converged = True
                 break
         if total >= max_samples:

@@ -1,4 +1,5 @@
-"""The RANSAC loop's race of several arms (line pairs): pooled stopping, lagging arms.
+"""The RANSAC loop's race of several arms (line pairs): pooled stopping, lagging arms, and a
+wrong line pair on repetitive texture that an H_e fits exactly.
 
 Arms here are stage-2 problems of the separable method (3 fixed correspondences + 5 sampled,
 eight-point) on a synthetic scene with 65 % outliers, where F(5, r) is several hundred samples,
@@ -9,10 +10,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.ransac import RaceOptions, ransac_trials, run_ransac
-from sepfm_ros.geometry.synthetic import make_pair
+from sepfm_ros.geometry.synthetic import SyntheticPair, make_pair
 
 SCENE = make_pair(n_inliers=120, n_outliers=270, n_lines=2, noise=0.3, seed=3)
 DATA = Correspondences.from_pixels(SCENE.pts1, SCENE.pts2)
@@ -74,3 +76,73 @@ def test_lagging_arms_do_not_count_toward_stopping():
         need = ransac_trials(5, 1.0 - r.count / len(DATA), 0.99)
         assert r.samples[0] >= need
         assert r.count >= 0.85 * np.count_nonzero(SCENE.is_inlier)
+
+
+def repetitive_row_scene(seed: int) -> tuple[SyntheticPair, np.ndarray, np.ndarray, np.ndarray]:
+    """A scene whose strongest line pair is a row of repeated texture matched one period off.
+
+    150 general and 2 x 12 line correspondences, 150 outliers, 0.3 px noise, and in front 25
+    wrong matches along one 3D row of equally spaced points, point i of image 1 matched with
+    point i + 1 of image 2 (a row of windows): they lie on an image line pair and follow a 1D
+    homography exactly, so Hough ranks them first and stage 1 fits an H_e to all of them, but
+    the F through a triple of them is wrong. Returns (scene, pts1, pts2, is_inlier): inliers are
+    the matches within 1 px of the true F.
+    """
+    sp = make_pair(n_inliers=150, n_outliers=150, n_lines=2, noise=0.3, seed=seed)
+    rng = np.random.default_rng(100 + seed)
+    w, h = sp.image_size
+    n_rep, centre = 25, np.array([0.0, 0.0, 6.0])
+
+    def project(P: np.ndarray, X: np.ndarray) -> np.ndarray:
+        x = np.concatenate([X, np.ones((len(X), 1))], axis=1) @ P.T
+        return x[:, :2] / x[:, 2:]
+
+    def inside(x: np.ndarray) -> bool:
+        return bool(((x[:, 0] > 1) & (x[:, 0] < w - 2) & (x[:, 1] > 1) & (x[:, 1] < h - 2)).all())
+
+    while True:
+        A, B = centre + rng.uniform(-2.5, 2.5, (2, 3)) * np.array([1.0, 0.8, 1.0])
+        if np.linalg.norm(B - A) < 2.5:
+            continue
+        X = A + np.linspace(0.0, 1.0, n_rep + 1)[:, None] * (B - A)
+        x1, x2 = project(sp.P1, X), project(sp.P2, X)
+        if inside(x1) and inside(x2):
+            break
+    r1 = x1[:-1] + rng.normal(0.0, 0.3, (n_rep, 2))
+    r2 = x2[1:] + rng.normal(0.0, 0.3, (n_rep, 2))
+    pts1 = np.concatenate([r1, sp.pts1])
+    pts2 = np.concatenate([r2, sp.pts2])
+    # the truth is the true F's verdict: a row along an epipolar line pair matched one period
+    # off is as consistent with it as a right match (and indistinguishable by any F)
+    inl = np.concatenate([np.zeros(n_rep, bool), sp.is_inlier])
+    inl[:n_rep] = symmetric_epipolar_distance(sp.F, r1, r2) < 1.0
+    return sp, pts1, pts2, inl
+
+
+def test_good_line_pair_overtakes_a_wrong_one_on_repetitive_texture():
+    # The wrong pair leads the race; a good pair joining later must get samples at the
+    # leader's pace and its own local optimisation to overtake it. Before (new arms' batches
+    # grew from 1, LO only for models beating every arm's best raw model): sep4 kept the wrong
+    # F on 3 of these 12 scenes (57, 64 and 53 % of the true inliers), sep5 on 1 (65 %).
+    recovered = {"sep4": [], "sep5": [], "ransac7": []}
+    hypotheses = {m: [] for m in recovered}
+    for seed in range(12):
+        sp, pts1, pts2, inl = repetitive_row_scene(seed)
+        for method in recovered:
+            est = estimate_fundamental(pts1, pts2, sp.image_size, method=method, seed=0)
+            assert est.F is not None
+            false = np.count_nonzero(est.inliers & ~inl)
+            share = np.count_nonzero(est.inliers & inl) / np.count_nonzero(inl)
+            recovered[method].append(share if false <= 0.05 * np.count_nonzero(inl) else 0.0)
+            hypotheses[method].append(est.hypotheses)
+    print(
+        "[race] repetitive row, recovered:",
+        {m: np.round(v, 2).tolist() for m, v in recovered.items()},
+    )
+    print("[race] repetitive row, hypotheses:", hypotheses)
+    ok = {m: sum(r >= 0.95 for r in v) for m, v in recovered.items()}
+    assert ok["ransac7"] == 12  # the scene itself is solvable
+    assert ok["sep5"] == 12
+    assert ok["sep4"] >= 11  # one scene's good pairs join late and are badly conditioned
+    for m in ("sep4", "sep5"):
+        assert np.median(hypotheses[m]) < 0.6 * np.median(hypotheses["ransac7"])

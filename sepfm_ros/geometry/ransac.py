@@ -176,6 +176,7 @@ def run_ransac(
     arm_best: list[int] = []  # best inlier count per arm
     arm_model: list[Any] = []  # best minimal-sample model per arm, and its cost
     arm_cost: list[float] = []
+    arm_raw_count: list[int] = []  # inlier count of the arm's best minimal-sample model
     arm_checked: list[bool] = []  # arm's best model was locally optimised before a drop
     active: list[int] = []
     dropped: list[int] = []
@@ -189,13 +190,13 @@ def run_ransac(
         arm_best.append(-1)
         arm_model.append(None)
         arm_cost.append(np.inf)
+        arm_raw_count.append(0)
         arm_checked.append(False)
         active.append(len(pool) - 1)
         return True
 
     join()
     best_model, best_cost, best_count, leader = None, np.inf, -1, -1
-    best_raw_cost, best_raw_count = np.inf, 0
     extra_lo = 0
     hypotheses = 0
 
@@ -219,6 +220,14 @@ def run_ransac(
         bar = race.drop_ratio * best_count
         return sum(n for a, n in enumerate(samples) if a == leader or arm_best[a] >= bar)
 
+    def drop_after(a: int) -> float:
+        """Samples after which a lagging arm ``a`` is dropped: had its fixed points been
+        right, it would have drawn an all-inlier sample by then with probability
+        1 - drop_alpha (at the best model's inlier ratio)."""
+        w = min(1.0, max(best_count, 0) / pool[a].n)
+        p_good = w ** pool[a].sample_size
+        return float(np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)))
+
     if initial is not None and pool:
         best_model, best_cost, best_count = initial
         leader = 0
@@ -228,7 +237,11 @@ def run_ransac(
     converged = False
 
     while active:
-        # one round: every active arm draws a batch sized by what it still needs
+        # one round: every active arm draws the same batch, sized by what is still needed and
+        # by the most-sampled arm, so an arm that joins late races at the leader's pace (one
+        # growing its own batches from 1 left a good line pair joining after a wrong one too
+        # few samples to find its model)
+        pace = max(1, max(samples[a] for a in active))
         for a in list(active):
             arm = pool[a]
             need = _trials_needed(
@@ -239,7 +252,7 @@ def run_ransac(
             if leader >= 0 and done >= need:
                 break
             # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
-            b = int(np.clip(need - done, 1, min(batch, max(1, samples[a]))))
+            b = int(np.clip(need - done, 1, min(batch, pace)))
             b = min(b, max_samples - total)
             if b <= 0:
                 continue
@@ -253,7 +266,8 @@ def run_ransac(
             hypotheses += len(models)
             i = int(np.argmin(cost))
             arm_best[a] = max(arm_best[a], int(count.max()))
-            if cost[i] < arm_cost[a]:
+            improved = cost[i] < arm_cost[a]
+            if improved:
                 arm_model[a], arm_cost[a] = models[i], float(cost[i])
             if cost[i] < best_cost:
                 best_model, best_cost, best_count, leader = (
@@ -262,14 +276,16 @@ def run_ransac(
                     int(count[i]),
                     a,
                 )
-            # LO-RANSAC: optimise every minimal-sample model that beats the best minimal-sample
-            # model so far. Comparing with the best *refined* model instead would starve LO when
-            # minimal samples are badly conditioned (fixed line points), as their raw support
-            # then stays below a refined wrong-basin model's.
-            if cost[i] < best_raw_cost:
-                best_raw_cost, best_raw_count = float(cost[i]), int(count[i])
+            # LO-RANSAC: optimise every minimal-sample model that beats its arm's best
+            # minimal-sample model so far. Comparing with the best *refined* model instead would
+            # starve LO when minimal samples are badly conditioned (fixed line points), as their
+            # raw support then stays below a refined wrong-basin model's; comparing across arms
+            # would starve a good line pair racing a wrong one whose fixed points an H_e fits
+            # exactly (repetitive texture): the wrong arm's raw models score higher.
+            if improved:
+                arm_raw_count[a] = int(count[i])
                 local_optimization(a, models[i])
-            elif extra_lo < max_extra_lo and count[i] >= extra_lo_ratio * best_raw_count:
+            elif extra_lo < max_extra_lo and count[i] >= extra_lo_ratio * arm_raw_count[a]:
                 extra_lo += 1
                 local_optimization(a, models[i])
         # adaptive stopping on the samples of the arms that agree with the best model
@@ -287,9 +303,7 @@ def run_ransac(
             for a in list(active):
                 if a == leader or arm_best[a] >= race.drop_ratio * best_count:
                     continue
-                w = min(1.0, best_count / pool[a].n)
-                p_good = w ** pool[a].sample_size
-                if samples[a] < np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)):
+                if samples[a] < drop_after(a):
                     continue
                 if not arm_checked[a] and arm_model[a] is not None:
                     arm_checked[a] = True

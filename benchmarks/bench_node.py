@@ -87,6 +87,28 @@ def cpu_seconds(pid: int | None = None) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
+def thread_cpu(pid: int) -> dict[str, float]:
+    """CPU seconds of process ``pid`` per thread name (the main thread is the executor)."""
+    out: dict[str, float] = defaultdict(float)
+    tick = os.sysconf("SC_CLK_TCK")
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            comm = (task / "comm").read_text().strip()
+            fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:  # the thread ended meanwhile
+            continue
+        name = "executor" if task.name == str(pid) else comm
+        out[name] += (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
+def thread_line(before: dict[str, float], after: dict[str, float], pairs: int) -> str:
+    """Node CPU ms per answered pair by thread (largest first; threads below 0.05 ms left out)."""
+    per = {k: (after.get(k, 0.0) - before.get(k, 0.0)) * 1e3 / max(1, pairs) for k in after}
+    return "  ".join(f"{k} {v:.1f}" for k, v in sorted(per.items(), key=lambda kv: -kv[1])
+                     if v >= 0.05)  # fmt: skip
+
+
 def node_values(args) -> dict:
     """The node's parameter values for this run: its defaults with the command-line changes."""
     from sepfm_ros.ros.node import PARAMS
@@ -109,13 +131,17 @@ def pipeline_steps(mode: str, images: list) -> list[tuple]:
 
 
 def bench_pipeline(mode, images, args) -> None:
+    from sepfm_ros.pipeline.compiled import warm_up
     from sepfm_ros.pipeline.pipeline import Pipeline
     from sepfm_ros.ros.node import limit_thread_pools, pipeline_config
 
     limit_thread_pools(1)  # as in the node
+    warm_up()  # as the node does before its first frame: compiling is not timed
     # as in the node: features cached per frame, the two images of a stereo pair detected at once
     pipeline = Pipeline(pipeline_config(node_values(args)), cache_size=8, parallel_detect=True)
     steps = pipeline_steps(mode, images)
+    for step in steps[:3]:
+        pipeline.process(*step)
     cpu0 = cpu_seconds()
     per_stage: dict[str, list[float]] = defaultdict(list)
     totals = []
@@ -233,7 +259,7 @@ class Feeder:
         self.rclpy.try_shutdown(context=self.context)
 
 
-def summarize(label, feeder, sent_stamps, seconds, cpu_s):
+def summarize(label, feeder, sent_stamps, seconds, cpu_s, threads=None):
     time.sleep(1.0)
     with feeder.lock:
         got = [feeder.answers[s] for s in sent_stamps if s in feeder.answers]
@@ -255,6 +281,8 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s):
         f"  node CPU {cpu_s * 1e3 / max(1, len(got)):.1f} ms/pair"
     )
     print(f"      stages ms: {stage_line(per_stage)}")
+    if threads is not None:
+        print(f"      node CPU ms/pair by thread: {thread_line(*threads, len(got))}")
 
 
 def bench_node(mode, images, args) -> None:
@@ -290,7 +318,7 @@ def bench_node(mode, images, args) -> None:
             frame += 1
             answered += feeder.wait_answer(stamp, 10.0)
         # paced at args.rate pairs/s (motion mode: frames/s, one pair per frame)
-        cpu0 = cpu_seconds(proc.pid)
+        cpu0, threads0 = cpu_seconds(proc.pid), thread_cpu(proc.pid)
         sent = []
         period = 1.0 / args.rate
         start = time.monotonic()
@@ -303,10 +331,10 @@ def bench_node(mode, images, args) -> None:
             frame += 1
             sent.append(stamp)
             k += 1
-        cpu_s = cpu_seconds(proc.pid) - cpu0
-        summarize(f"node @{args.rate:g} Hz", feeder, sent, args.seconds, cpu_s)
+        cpu_s, threads = cpu_seconds(proc.pid) - cpu0, (threads0, thread_cpu(proc.pid))
+        summarize(f"node @{args.rate:g} Hz", feeder, sent, args.seconds, cpu_s, threads)
         # closed loop
-        cpu0 = cpu_seconds(proc.pid)
+        cpu0, threads0 = cpu_seconds(proc.pid), thread_cpu(proc.pid)
         sent = []
         start = time.monotonic()
         while time.monotonic() - start < args.seconds:
@@ -316,8 +344,8 @@ def bench_node(mode, images, args) -> None:
             sent.append(stamp)
             feeder.wait_answer(stamp, 5.0)
         elapsed = time.monotonic() - start
-        cpu_s = cpu_seconds(proc.pid) - cpu0
-        summarize("node closed loop", feeder, sent, elapsed, cpu_s)
+        cpu_s, threads = cpu_seconds(proc.pid) - cpu0, (threads0, thread_cpu(proc.pid))
+        summarize("node closed loop", feeder, sent, elapsed, cpu_s, threads)
     finally:
         feeder.close()
         proc.send_signal(signal.SIGINT)

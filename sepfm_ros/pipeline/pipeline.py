@@ -23,6 +23,9 @@ search, ``stage1``, ``stage2``, ``refine``) and ``total``.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import threading
 import time
 from collections import OrderedDict
 from collections.abc import Hashable
@@ -159,6 +162,33 @@ class PipelineResult:
         return self.estimate.ok
 
 
+def _load_prctl():
+    try:
+        return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True).prctl
+    except (OSError, AttributeError):
+        return None
+
+
+_PRCTL = _load_prctl()
+_PR_SET_NAME = 15
+
+
+def name_native_thread(name: str | None = None) -> None:
+    """Give the calling thread its Python name in the OS too (``top -H``, ``/proc/.../comm``).
+
+    Python 3.11 leaves every thread named after the process; with the name, the CPU of each of
+    the node's threads can be read from ``/proc`` (benchmarks/bench_node.py does). Linux only,
+    15 characters; elsewhere a no-op.
+    """
+    if _PRCTL is None:
+        return
+    text = (name or threading.current_thread().name).encode()[:15]
+    try:
+        _PRCTL(_PR_SET_NAME, ctypes.c_char_p(text), 0, 0, 0)
+    except (OSError, ctypes.ArgumentError):
+        pass
+
+
 def _ms(t0: float) -> float:
     return (time.perf_counter() - t0) * 1e3
 
@@ -185,7 +215,14 @@ class Pipeline:
         self._detector = None
         self._detector_b = None  # the helper thread's detector (parallel_detect)
         self._helper = (
-            ThreadPoolExecutor(1, thread_name_prefix="sepfm-detect") if parallel_detect else None
+            ThreadPoolExecutor(
+                1,
+                thread_name_prefix="sepfm-detect",
+                initializer=name_native_thread,
+                initargs=("sepfm-detect",),
+            )
+            if parallel_detect
+            else None
         )
         self.configure(config or PipelineConfig())
 
@@ -241,12 +278,14 @@ class Pipeline:
         image_b: np.ndarray,
         key_a: Hashable | None,
         key_b: Hashable | None,
+        parallel: bool = True,
     ) -> tuple[tuple[np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray | None]]:
         """Features of both images: cached, or detected (b on the helper thread if any)."""
         cached = key_a in self._cache or key_b in self._cache
-        if self._helper is None or cached or (key_a is not None and key_a == key_b):
+        helper = self._helper if parallel else None
+        if helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
-        pending_b = self._helper.submit(detect, image_b, self._detector_b)
+        pending_b = helper.submit(detect, image_b, self._detector_b)
         feats_a = self._store(key_a, detect(image_a, self._detector))
         return feats_a, self._store(key_b, pending_b.result())
 
@@ -257,11 +296,15 @@ class Pipeline:
         key_a: Hashable | None = None,
         key_b: Hashable | None = None,
         prior_timings_ms: dict[str, float] | None = None,
+        parallel_detect: bool = True,
     ) -> MatchedPair:
         """First half of :meth:`process`: features (cached by key) and matches of a pair.
 
         Runs on the thread that owns this pipeline (it uses the feature cache); the result
         carries the config it was made with, so :meth:`estimate` may run on another thread.
+        ``parallel_detect=False`` detects both images on the calling thread even when the
+        pipeline has a helper thread (the same features; the node does so while its other
+        worker is busy, so that three threads do not share two cores).
         """
         t_start = time.perf_counter()
         cfg = self._config
@@ -270,7 +313,9 @@ class Pipeline:
         size_b = (int(image_b.shape[1]), int(image_b.shape[0]))
 
         t0 = time.perf_counter()
-        (pts_a, desc_a), (pts_b, desc_b) = self._pair_features(image_a, image_b, key_a, key_b)
+        (pts_a, desc_a), (pts_b, desc_b) = self._pair_features(
+            image_a, image_b, key_a, key_b, parallel_detect
+        )
         timings["features"] = _ms(t0)
 
         t0 = time.perf_counter()

@@ -126,3 +126,21 @@ def test_plane_check_keeps_general_scenes():
         assert est.status == "ok", est.status
         check = plane_and_parallax(est.F, pair.pts1, pair.pts2, 1.0, np.random.default_rng(seed))
         assert not check.replaced and check.reason is None
+
+
+@pytest.mark.parametrize("method", ["sep5", "ransac7"])
+def test_matches_along_one_line_are_flagged(method):
+    # ORB matches of a 3 px high textured row and the same row 6 px to the right (the live
+    # robustness test's "matches_on_one_line"): nearly every 4-point sample is degenerate for a
+    # homography, so the plane check alone can miss it; no exception, and an F carries a
+    # "degenerate" status
+    from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+
+    rng = np.random.default_rng(5)
+    row = np.full((240, 320), 90, np.uint8)
+    row[118:121, 20:-20] = rng.integers(0, 256, (3, 280))
+    result = Pipeline(PipelineConfig(method=method)).process(row, np.roll(row, 6, axis=1))
+    est = result.estimate
+    assert len(result.matches) >= 50
+    assert est.F is None or est.status.startswith("degenerate"), est.status
+    assert est.status != "ok"

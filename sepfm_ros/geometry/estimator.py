@@ -179,6 +179,26 @@ def _degeneracy(p1: np.ndarray, p2: np.ndarray, threshold: float) -> str | None:
     return None
 
 
+def _line_band_status(q1: np.ndarray, q2: np.ndarray, threshold: float) -> str | None:
+    """A reason when the inliers (K, 2) of either image lie in a band around one line.
+
+    Matches within a couple of pixels of one image line fix only the line pair's share of F
+    (3 of its 7 degrees of freedom, paper Sec. 3); the rest is fitted to noise. The band is the
+    standard deviation across the points' principal axis, compared with 2 x ``threshold``.
+    """
+    for name, q in (("image 1", q1), ("image 2", q2)):
+        if len(q) < 2:
+            continue
+        cov = np.cov(q.T)
+        across = float(np.sqrt(max(0.0, np.linalg.eigvalsh(cov)[0])))
+        if across < 2.0 * threshold:
+            return (
+                f"degenerate: the {len(q)} inliers lie along one line in {name} "
+                f"({across:.1f} px across it)"
+            )
+    return None
+
+
 def _triples(fit: LineHomographyFit, p1: np.ndarray, p2: np.ndarray, kind: str):
     """The fixed line correspondences of stage 2.
 
@@ -352,6 +372,8 @@ def estimate_fundamental(
         est.status = f"degenerate: only {k} inliers"
     elif plane is not None:
         est.status = plane
+    else:
+        est.status = _line_band_status(p1[est.inliers], p2[est.inliers], threshold) or est.status
     est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
     return est
 

@@ -142,8 +142,9 @@ def _count_duplicates(p1: np.ndarray, p2: np.ndarray) -> tuple[int, int, int]:
 
 
 @numba.njit(cache=True)
-def _spread_ratio(p: np.ndarray) -> float:
-    """Smallest / largest eigenvalue of the 2x2 scatter matrix of (N, 2) points (0: collinear)."""
+def _principal_scatter(p: np.ndarray) -> tuple[float, float]:
+    """(small, large) eigenvalues of the 2x2 scatter matrix (sum of outer products about the
+    mean, px^2) of (N, 2) points."""
     n = p.shape[0]
     mu, mv = p[:, 0].mean(), p[:, 1].mean()
     a = b = c = 0.0
@@ -152,12 +153,24 @@ def _spread_ratio(p: np.ndarray) -> float:
         a += du * du
         b += du * dv
         c += dv * dv
-    half_trace = 0.5 * (a + c)
-    root = np.sqrt(0.25 * (a - c) ** 2 + b * b)
-    big = half_trace + root
+    big = 0.5 * (a + c) + np.sqrt(0.25 * (a - c) ** 2 + b * b)
     if big <= 0:
-        return 0.0
-    return max(0.0, (a * c - b * b) / big) / big  # det / big = the small eigenvalue
+        return 0.0, 0.0
+    return max(0.0, (a * c - b * b) / big), big  # det / big = the small eigenvalue
+
+
+@numba.njit(cache=True)
+def _spread_ratio(p: np.ndarray) -> float:
+    """Smallest / largest eigenvalue of the 2x2 scatter matrix of (N, 2) points (0: collinear)."""
+    small, big = _principal_scatter(p)
+    return small / big if big > 0 else 0.0
+
+
+@numba.njit(cache=True)
+def _across_std(p: np.ndarray) -> float:
+    """Standard deviation (px) of (N >= 2, 2) points across their principal axis."""
+    small, _ = _principal_scatter(p)
+    return np.sqrt(small / (p.shape[0] - 1))
 
 
 @numba.njit(cache=True)
@@ -189,8 +202,7 @@ def _line_band_status(q1: np.ndarray, q2: np.ndarray, threshold: float) -> str |
     for name, q in (("image 1", q1), ("image 2", q2)):
         if len(q) < 2:
             continue
-        cov = np.cov(q.T)
-        across = float(np.sqrt(max(0.0, np.linalg.eigvalsh(cov)[0])))
+        across = _across_std(np.ascontiguousarray(q))
         if across < 2.0 * threshold:
             return (
                 f"degenerate: the {len(q)} inliers lie along one line in {name} "

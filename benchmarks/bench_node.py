@@ -349,7 +349,11 @@ def bench_node(mode, images, args) -> None:
     finally:
         feeder.close()
         proc.send_signal(signal.SIGINT)
-        proc.wait(15)
+        try:
+            proc.wait(15)
+        except subprocess.TimeoutExpired:  # never leave a node running (it would load the cores)
+            proc.kill()
+            proc.wait()
 
 
 def main() -> int:

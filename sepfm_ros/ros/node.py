@@ -16,15 +16,20 @@ dropped, so nothing queues without bound. Two worker threads then run the
   ``max_samples`` parameter caps its RANSAC samples, so a pair without consensus (a few dozen
   matches, most of them wrong) cannot hold it for long.
 
-The match thread starts a pair only when the hand-over slot is empty, so it runs at most one pair
-ahead of the estimator, and it starts when the estimator's expected remaining time (recent medians
-of both stages) drops to the expected matching time, so it matches the newest pair just before
-the estimator can take it: on two cores the features of pair n+1 are computed while pair n is
-estimated, and no pair is matched and then thrown away. Each pair goes through exactly the calls
-of :meth:`Pipeline.process` with the config it was matched with, so the results equal offline
-processing. Threads of our own are used rather than a MultiThreadedExecutor because the
-latest-only slots are needed anyway and running several estimations at once on 2 cores would
-only raise everyone's latency.
+When saturated (a pair already waits when the estimator starts), the match thread starts the
+next pair only when the estimator's expected remaining time (recent median of its duration) is
+down to a few milliseconds, so a pair's two stages run almost one after the other, each with the
+cores to itself. Matching pair n+1 during all of pair n's estimation (as before 2026-11-22)
+answered a few more pairs per second when saturated but ran the two stages, the executor and the
+sender on two cores at once, each stage about twice as slow: under input at twice the processing
+rate the p95 latency reached 2.1-3.5x its unloaded value (with the hand-off 1.4-1.9x). When the
+pair waiting in the slot is already older than
+half the input period, the match thread waits for the next one (expected within the other half,
+and at most a quarter of a pair's processing time): its answer comes out at about the same time
+and fresher. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
+config it was matched with, so the results equal offline processing. Threads of our own are used
+rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
+several estimations at once on 2 cores would only raise everyone's latency.
 
 For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
 OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core
@@ -68,7 +73,12 @@ from sepfm_ros.geometry import METHODS
 from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.features import FEATURES
-from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig
+from sepfm_ros.pipeline.pipeline import (
+    MatchedPair,
+    Pipeline,
+    PipelineConfig,
+    name_native_thread,
+)
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
     check_compressed,
@@ -173,10 +183,13 @@ PARAMS: dict[str, ParamSpec] = {
     ),
 }
 
-# The match thread starts this much earlier than the estimator is expected to need its result,
-# and never waits longer than MAX_MATCH_DELAY_S for the estimator (see _match_start_delay).
+# The match thread starts this much before the estimator is expected to finish, and never waits
+# longer than MAX_MATCH_DELAY_S for the estimator (see _match_start_delay).
 MATCH_START_MARGIN_S = 0.004
 MAX_MATCH_DELAY_S = 0.05
+# Waiting for a fresher pair (see _fresher_pair_delay) costs at most this share of the expected
+# processing time of a pair.
+MAX_FRESHER_WAIT_SHARE = 0.25
 
 # How often input silence is checked (a change of the health level is reported at once).
 STALL_CHECK_PERIOD_S = 0.1
@@ -320,6 +333,9 @@ class SepfmNode(Node):
         self._estimating_since: float | None = None  # monotonic start of the current estimate
         self._match_s = RecentMedian()  # seconds per stage, to time the start of matching
         self._estimate_s = RecentMedian()
+        self._period_s = RecentMedian()  # seconds between offered pairs (the input period)
+        self._last_offer: float | None = None
+        self._passed_over: Job | None = None  # a pair kept waiting for a fresher one, once
         self._stop = False
         self._pending_config: PipelineConfig | None = None
         self._pipeline = Pipeline(pipeline_config(values), cache_size=8, parallel_detect=True)
@@ -472,6 +488,9 @@ class SepfmNode(Node):
 
     def _offer(self, job: Job) -> None:
         with self._cond:
+            if self._last_offer is not None:
+                self._period_s.add(job.received - self._last_offer)
+            self._last_offer = job.received
             if self._slot is not None:
                 self._dropped += 1
             self._slot = job
@@ -528,13 +547,17 @@ class SepfmNode(Node):
     # ---------------------------------------------------------------- worker
     def _match_loop(self) -> None:
         """Thread ``sepfm-match``: newest pair -> decoded images -> matches -> hand-over slot."""
+        name_native_thread()
         while True:
             with self._cond:
                 while not self._stop:
                     if self._slot is None or self._matched is not None:
                         self._cond.wait()
                         continue
-                    delay = self._match_start_delay(time.monotonic())
+                    now = time.monotonic()
+                    delay = self._match_start_delay(now)
+                    if delay <= 0.0:
+                        delay = self._fresher_pair_delay(now)
                     if delay <= 0.0:
                         break
                     self._cond.wait(timeout=delay)  # a newer pair may arrive meanwhile
@@ -567,13 +590,38 @@ class SepfmNode(Node):
         medians of both stages) drops to the expected matching time, plus a margin so that the
         estimator does not wait for it. Caller holds the lock.
         """
-        if self._estimating_since is None or not (self._match_s.ready and self._estimate_s.ready):
+        if self._estimating_since is None or not self._estimate_s.ready:
             return 0.0
         remaining = self._estimate_s.value - (now - self._estimating_since)
-        return min(remaining - self._match_s.value - MATCH_START_MARGIN_S, MAX_MATCH_DELAY_S)
+        return min(remaining - MATCH_START_MARGIN_S, MAX_MATCH_DELAY_S)
+
+    def _fresher_pair_delay(self, now: float) -> float:
+        """Seconds to wait for a pair newer than the one in the slot (<= 0: take this one).
+
+        Under overload the slot's pair is up to one input period old when the match thread
+        frees up. When it is older than half the (regular) input period, the next pair is due
+        within the other half: waiting for it delays the answer by that much but makes it a
+        period fresher. Only while the input period is known and the wait is short against a
+        pair's processing time; a pair is passed over once (if no newer one comes, it is
+        processed after the wait). Caller holds the lock.
+        """
+        job = self._slot
+        if job is None or job is self._passed_over:
+            return 0.0
+        if not (self._period_s.ready and self._match_s.ready and self._estimate_s.ready):
+            return 0.0
+        period = self._period_s.value
+        age = now - job.received
+        due = period - age  # the next pair's expected arrival, from now
+        budget = MAX_FRESHER_WAIT_SHARE * (self._match_s.value + self._estimate_s.value)
+        if not (age > 0.5 * period and 0.0 < due <= budget):
+            return 0.0
+        self._passed_over = job
+        return due + 0.001
 
     def _estimate_loop(self) -> None:
         """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
+        name_native_thread()
         while True:
             with self._cond:
                 while self._matched is None and not self._stop:

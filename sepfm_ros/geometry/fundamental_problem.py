@@ -127,7 +127,6 @@ class FundamentalProblem:
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
-        fitted = iterative_refit(
+        return iterative_refit(
             model, self.data, self.threshold, factors=LO_FACTORS, irls_iterations=0
         )
-        return np.stack(fitted) if fitted else np.zeros((0, 3, 3))

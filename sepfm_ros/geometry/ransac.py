@@ -252,7 +252,7 @@ def run_ransac(
             if leader >= 0 and done >= need:
                 break
             # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
-            b = int(np.clip(need - done, 1, min(batch, pace)))
+            b = max(1, min(need - done, batch, pace))
             b = min(b, max_samples - total)
             if b <= 0:
                 continue

@@ -133,7 +133,7 @@ def iterative_refit(
     threshold: float,
     factors: tuple[float, ...] = REFIT_FACTORS,
     irls_iterations: int = 2,
-) -> list[np.ndarray]:
+) -> np.ndarray:
     """Refit F on its inliers under a shrinking threshold (LO-RANSAC's iterative least squares).
 
     Each step takes the inliers of the current model at ``factor * threshold`` px (symmetric
@@ -144,12 +144,11 @@ def iterative_refit(
     Args:
         F: (3, 3) start model in pixels. data: all matches.
     Returns:
-        Every model fitted on the way (each was scored against all matches; the caller picks
-        the best by its own scoring); empty when no step had 8 inliers.
+        (K, 3, 3) every model fitted on the way (each was scored against all matches; the
+        caller picks the best by its own scoring); K = 0 when no step had 8 inliers.
     """
-    fitted = _iterative_refit_kernel(
+    return _iterative_refit_kernel(
         np.ascontiguousarray(F, dtype=np.float64), data.X1, data.X2, data.x1, data.x2,
         data.T1, data.T2, float(threshold), np.asarray(factors, dtype=np.float64),
         int(irls_iterations),
     )  # fmt: skip
-    return list(fitted)

@@ -835,14 +835,15 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     )
     assert proc.proc.poll() is None
     assert rss[-1] - rss[0] < RSS_LIMIT_MB
-    # Issue 6 asks for p95_loaded < 2 x p95_unloaded. Not reliably met on 2 cores: at twice the
-    # measured processing rate the ratio was 0.96-2.82 over 10 runs (2.2 and 2.8 among them).
-    # The node-side figures above say why: under load both worker stages run concurrently and
-    # each is ~1.5-2x slower than alone (feature detection, estimation: the two workers, the
-    # executor and the sender share two cores and the GIL), plus the newest pair's age (at most
-    # one input period); DDS/executor queueing before the callback is small (outside_node).
-    # Asserted here: latency stays bounded under overload (no queueing: a queue would grow
-    # without bound over the 60 s), within 3x the unloaded p95.
+    # Issue 6 asks for p95_loaded < 2 x p95_unloaded. Not reliably met on 2 cores: with the
+    # match thread handing over to the estimator (no overlap when saturated, 2026-11-22) the
+    # ratio was 1.42-2.75 over 5 runs of 60 s (loaded p95 56-65 ms every time; the ratio follows
+    # the unloaded p95, 24-42 ms, which is lowest on a quiet machine), 2.07-3.45 before. The
+    # node-side figures above say why: the sender and the node's executor handle twice the
+    # images on the same cores, so detection and estimation run up to ~1.5-2x slower than
+    # alone, plus the newest pair's age; DDS/executor queueing before the callback is small
+    # (outside_node). Asserted here: latency stays bounded under overload (no queueing: a queue
+    # would grow without bound over the 60 s), within 3x the unloaded p95.
     assert p95_loaded < 3.0 * p95_unloaded
     assert dropped > 0 and len(lat_loaded) + dropped == paired
     assert len(lat_recovery) == len(recovery) and dropped_recovery == 0

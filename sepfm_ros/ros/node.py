@@ -16,20 +16,21 @@ dropped, so nothing queues without bound. Two worker threads then run the
   ``max_samples`` parameter caps its RANSAC samples, so a pair without consensus (a few dozen
   matches, most of them wrong) cannot hold it for long.
 
-When saturated (a pair already waits when the estimator starts), the match thread starts the
-next pair only when the estimator's expected remaining time (recent median of its duration) is
-down to a few milliseconds, so a pair's two stages run almost one after the other, each with the
-cores to itself. Matching pair n+1 during all of pair n's estimation (as before 2026-11-22)
-answered a few more pairs per second when saturated but ran the two stages, the executor and the
-sender on two cores at once, each stage about twice as slow: under input at twice the processing
-rate the p95 latency reached 2.1-3.5x its unloaded value (with the hand-off 1.4-1.9x). When the
-pair waiting in the slot is already older than
-half the input period, the match thread waits for the next one (expected within the other half,
-and at most a quarter of a pair's processing time): its answer comes out at about the same time
-and fresher. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
-config it was matched with, so the results equal offline processing. Threads of our own are used
-rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
-several estimations at once on 2 cores would only raise everyone's latency.
+When saturated (a pair already waits when the estimator starts), the match thread starts the next
+pair only when the estimator's expected remaining time (recent median of its duration) is down to a
+few milliseconds, so a pair's two stages run almost one after the other and do not compete with
+each other (the executor and the sender still take their share). Matching pair n+1 during all of
+pair n's estimation (as before 2026-11-22) answered a few more pairs per second when saturated but
+ran the two stages, the executor and the sender on two cores at once, each stage about twice as
+slow: under input at twice the processing rate the p95 latency was 65-83 ms (2.1-3.5x its unloaded
+value), with the hand-off 56-65 ms (1.4-2.8x, the ratio set mostly by the unloaded p95). When the
+pair waiting in the slot is already older than half the input period, the match thread waits for
+the next one (expected within the other half, and at most a quarter of a pair's processing time):
+its answer comes out at about the same time and fresher. Each pair goes through exactly the calls
+of :meth:`Pipeline.process` with the config it was matched with, so the results equal offline
+processing. Threads of our own are used rather than a MultiThreadedExecutor because the latest-only
+slots are needed anyway and running several estimations at once on 2 cores would only raise
+everyone's latency.
 
 For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
 OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core

@@ -11,13 +11,15 @@ every time):
 - ``pipeline``: the Pipeline called directly on decoded images (no ROS, the node's default
   config; in motion mode features cached per frame as the node does), pairs/s and per-stage ms;
 - ``pipeline 2 threads``: the same, matching pair n+1 on a second thread while pair n is
-  estimated, as the node does (the most the node could reach without ROS);
+  estimated (the two stages fully overlapped; the node itself hands over instead when
+  saturated, see sepfm_ros/ros/node.py);
 - ``node @R Hz``: the node subprocess fed pairs at R pairs/s over DDS for the given time:
   answered pairs/s, dropped pairs, latency receipt->publish p50/p95 (the node's own clock),
   end-to-end latency (stamp -> answer received here) p50/p95, worst wait before processing
   (receipt -> start), the node process's CPU time per answered pair (robust to other load on
-  the machine), and the per-stage split including decode, queue (matched pair waiting for the
-  estimate thread) and publish;
+  the machine) and its split by thread (executor = the main thread, sepfm-match, sepfm-detect,
+  sepfm-estimate, DDS threads; from /proc), and the per-stage split including decode, queue
+  (matched pair waiting for the estimate thread) and publish;
 - ``node closed loop``: the next pair is sent as soon as the previous answer arrived (the most
   the node sustains without dropping).
 

@@ -80,6 +80,24 @@ def test_writer_segments_survive_and_merge(tmp_path):
     assert got == [_string(i) for i in range(7)]
 
 
+def test_writer_never_leaves_a_folder_that_is_no_bag(tmp_path, monkeypatch):
+    # a process dying after the folder was made but before its first metadata.yaml (SIGKILL in
+    # the kill-safety test hit this window) must leave nothing under the output name
+    def die(self):
+        raise KeyboardInterrupt  # stands for the kill: nothing after this point runs
+
+    out = tmp_path / "b"
+    monkeypatch.setattr(BagWriter, "_write_metadata", die)
+    with pytest.raises(KeyboardInterrupt):
+        BagWriter(out, flush_interval_s=None)
+    assert not out.exists()
+    monkeypatch.undo()
+    with BagWriter(out, flush_interval_s=None) as w:  # the name is still free
+        w.add_topic("/a", "std_msgs/msg/String")
+    with BagReader(out) as r:
+        assert r.message_count == 0
+
+
 def test_header_stamp_from_cdr():
     assert header_stamp_ns(_image(12.25)) == 12_250_000_000
 

@@ -23,6 +23,7 @@ rosbags 0.11 writes mcap (``StoragePlugin.MCAP``), which is what this module use
 from __future__ import annotations
 
 import os
+import secrets
 import shutil
 import struct
 import time
@@ -318,11 +319,16 @@ class BagWriter:
         compress: bool = False,
         merge: bool = True,
     ) -> None:
-        self.path = check_output_path(path)
+        final = check_output_path(path)
+        # the bag appears only complete: built as a hidden sibling with an empty metadata.yaml,
+        # then renamed (a SIGKILL between mkdir and the first metadata left a folder that is no
+        # bag; a kill now leaves either nothing under the name or a readable empty bag)
+        scratch = final.with_name(f".{final.name}.creating-{os.getpid()}-{secrets.token_hex(4)}")
         try:
-            self.path.mkdir(parents=True)
+            scratch.mkdir(parents=True)
         except OSError as err:
-            raise BagError(f"cannot create output bag {self.path}: {err.strerror}") from None
+            raise BagError(f"cannot create output bag {final}: {err.strerror}") from None
+        self.path = scratch
         self.flush_interval_s = flush_interval_s
         self.compress = compress
         self.merge = merge
@@ -334,6 +340,12 @@ class BagWriter:
         self._last_flush = time.monotonic()
         self._closed = False
         self._write_metadata()  # an empty, readable bag from the start
+        try:
+            os.rename(scratch, final)
+        except OSError as err:
+            shutil.rmtree(scratch, ignore_errors=True)
+            raise BagError(f"cannot create output bag {final}: {err.strerror}") from None
+        self.path = final
 
     # ------------------------------------------------------------------ topics
     def add_topic(

@@ -837,7 +837,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     assert rss[-1] - rss[0] < RSS_LIMIT_MB
     # Issue 6 asks for p95_loaded < 2 x p95_unloaded. Not reliably met on 2 cores: with the
     # match thread handing over to the estimator (no overlap when saturated, 2026-11-22) the
-    # ratio was 1.42-2.75 over 5 runs of 60 s (loaded p95 56-65 ms every time; the ratio follows
+    # ratio was 1.39-2.75 over 10 runs of 60 s (loaded p95 47-65 ms every time; the ratio follows
     # the unloaded p95, 24-42 ms, which is lowest on a quiet machine), 2.07-3.45 before. The
     # node-side figures above say why: the sender and the node's executor handle twice the
     # images on the same cores, so detection and estimation run up to ~1.5-2x slower than

@@ -23,14 +23,14 @@ each other (the executor and the sender still take their share). Matching pair n
 pair n's estimation (as before 2026-11-22) answered a few more pairs per second when saturated but
 ran the two stages, the executor and the sender on two cores at once, each stage about twice as
 slow: under input at twice the processing rate the p95 latency was 65-83 ms (2.1-3.5x its unloaded
-value), with the hand-off 56-65 ms (1.4-2.8x, the ratio set mostly by the unloaded p95). When the
-pair waiting in the slot is already older than half the input period, the match thread waits for
-the next one (expected within the other half, and at most a quarter of a pair's processing time):
-its answer comes out at about the same time and fresher. Each pair goes through exactly the calls
-of :meth:`Pipeline.process` with the config it was matched with, so the results equal offline
-processing. Threads of our own are used rather than a MultiThreadedExecutor because the latest-only
-slots are needed anyway and running several estimations at once on 2 cores would only raise
-everyone's latency.
+value), with the hand-off 47-65 ms (1.4-2.8x, the ratio set mostly by the unloaded p95). While
+pairs arrive faster than the node processes them and the pair waiting in the slot is already older
+than half the input period, the match thread waits for the next one (expected within the other
+half, and at most a quarter of a pair's processing time): its answer comes out at about the same
+time and fresher. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
+config it was matched with, so the results equal offline processing. Threads of our own are used
+rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
+several estimations at once on 2 cores would only raise everyone's latency.
 
 For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
 OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core
@@ -602,9 +602,11 @@ class SepfmNode(Node):
         Under overload the slot's pair is up to one input period old when the match thread
         frees up. When it is older than half the (regular) input period, the next pair is due
         within the other half: waiting for it delays the answer by that much but makes it a
-        period fresher. Only while the input period is known and the wait is short against a
-        pair's processing time; a pair is passed over once (if no newer one comes, it is
-        processed after the wait). Caller holds the lock.
+        period fresher. Only while pairs arrive faster than the node processes them (then pairs
+        are dropped anyway; at a rate the node keeps up with, every pair is answered, even one
+        that waited behind a slow pair), while the input period is known, and when the wait is
+        short against a pair's processing time; a pair is passed over once (if no newer one
+        comes, it is processed after the wait). Caller holds the lock.
         """
         job = self._slot
         if job is None or job is self._passed_over:
@@ -612,10 +614,12 @@ class SepfmNode(Node):
         if not (self._period_s.ready and self._match_s.ready and self._estimate_s.ready):
             return 0.0
         period = self._period_s.value
+        processing = self._match_s.value + self._estimate_s.value
+        if period >= processing:
+            return 0.0  # the node keeps up: every pair is answered, none passed over
         age = now - job.received
         due = period - age  # the next pair's expected arrival, from now
-        budget = MAX_FRESHER_WAIT_SHARE * (self._match_s.value + self._estimate_s.value)
-        if not (age > 0.5 * period and 0.0 < due <= budget):
+        if not (age > 0.5 * period and 0.0 < due <= MAX_FRESHER_WAIT_SHARE * processing):
             return 0.0
         self._passed_over = job
         return due + 0.001

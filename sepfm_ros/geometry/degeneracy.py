@@ -151,11 +151,10 @@ def plane_and_parallax(
     if np.count_nonzero(inl) < 8:
         return out
     # a robust H on F's inliers (the question is whether one plane holds plane_share of them;
-    # matches F rejected would only slow the search down), seeded via OpenCV's RNG
-    # only a plane holding plane_share of them matters: F(4, 1 - plane_share) samples find one
-    # with confidence 0.995 (83 at 0.5) where a non-planar scene would run to 500. (Matches
-    # along one line, whose 4-point samples are degenerate for H, are flagged by the
-    # estimator's line-band check instead.)
+    # matches F rejected would only slow the search down), seeded via OpenCV's RNG; F(4, 1 -
+    # plane_share) samples find such a plane with confidence 0.995 (83 at 0.5) where a
+    # non-planar scene would run to 500 (matches along one line, whose 4-point samples are
+    # degenerate for H, are flagged by the estimator's line-band check instead)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
     iters = ransac_trials(4, 1.0 - plane_share, 0.995, max_trials=500)
     H, _ = cv2.findHomography(pts1[inl], pts2[inl], cv2.RHO, tol, maxIters=iters, confidence=0.995)

@@ -213,12 +213,15 @@ def run_ransac(
         if lcost[j] < best_cost:
             best_model, best_cost, best_count, leader = lo[j], float(lcost[j]), int(lcount[j]), a
 
+    def agrees(a: int) -> bool:
+        """Arm ``a`` holds the best model or its best support is near the best model's."""
+        return a == leader or arm_best[a] >= race.drop_ratio * best_count
+
     def pooled_samples() -> int:
-        """Samples of the leader and of the arms whose best support is near the best model's."""
+        """Samples of the arms that agree with the best model (0 before there is one)."""
         if leader < 0:
             return 0
-        bar = race.drop_ratio * best_count
-        return sum(n for a, n in enumerate(samples) if a == leader or arm_best[a] >= bar)
+        return sum(n for a, n in enumerate(samples) if agrees(a))
 
     def drop_after(a: int) -> float:
         """Samples after which a lagging arm ``a`` is dropped: had its fixed points been
@@ -301,14 +304,12 @@ def run_ransac(
         # minimal sample with fixed line points is often badly conditioned), let the next join
         if len(pool) > 1 and best_count > 0:
             for a in list(active):
-                if a == leader or arm_best[a] >= race.drop_ratio * best_count:
-                    continue
-                if samples[a] < drop_after(a):
+                if agrees(a) or samples[a] < drop_after(a):
                     continue
                 if not arm_checked[a] and arm_model[a] is not None:
                     arm_checked[a] = True
                     local_optimization(a, arm_model[a])
-                    if a == leader or arm_best[a] >= race.drop_ratio * best_count:
+                    if agrees(a):
                         continue
                 active.remove(a)
                 dropped.append(a)

@@ -278,14 +278,12 @@ class Pipeline:
         image_b: np.ndarray,
         key_a: Hashable | None,
         key_b: Hashable | None,
-        parallel: bool = True,
     ) -> tuple[tuple[np.ndarray, np.ndarray | None], tuple[np.ndarray, np.ndarray | None]]:
         """Features of both images: cached, or detected (b on the helper thread if any)."""
         cached = key_a in self._cache or key_b in self._cache
-        helper = self._helper if parallel else None
-        if helper is None or cached or (key_a is not None and key_a == key_b):
+        if self._helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
-        pending_b = helper.submit(detect, image_b, self._detector_b)
+        pending_b = self._helper.submit(detect, image_b, self._detector_b)
         feats_a = self._store(key_a, detect(image_a, self._detector))
         return feats_a, self._store(key_b, pending_b.result())
 
@@ -296,15 +294,11 @@ class Pipeline:
         key_a: Hashable | None = None,
         key_b: Hashable | None = None,
         prior_timings_ms: dict[str, float] | None = None,
-        parallel_detect: bool = True,
     ) -> MatchedPair:
         """First half of :meth:`process`: features (cached by key) and matches of a pair.
 
         Runs on the thread that owns this pipeline (it uses the feature cache); the result
         carries the config it was made with, so :meth:`estimate` may run on another thread.
-        ``parallel_detect=False`` detects both images on the calling thread even when the
-        pipeline has a helper thread (the same features; the node does so while its other
-        worker is busy, so that three threads do not share two cores).
         """
         t_start = time.perf_counter()
         cfg = self._config
@@ -313,9 +307,7 @@ class Pipeline:
         size_b = (int(image_b.shape[1]), int(image_b.shape[0]))
 
         t0 = time.perf_counter()
-        (pts_a, desc_a), (pts_b, desc_b) = self._pair_features(
-            image_a, image_b, key_a, key_b, parallel_detect
-        )
+        (pts_a, desc_a), (pts_b, desc_b) = self._pair_features(image_a, image_b, key_a, key_b)
         timings["features"] = _ms(t0)
 
         t0 = time.perf_counter()

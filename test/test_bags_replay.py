@@ -57,8 +57,11 @@ def _check_live_equals_process(bag, tmp_path, median_limit_px: float):
     log = (tmp_path / "node.log").read_text()
 
     with_f = [r for r in live_results if r.F is not None]
+    unanswered = sorted(set(offline) - {r.stamp_ns for r in live_results})
+    no_f = [(r.stamp_ns, r.info.get("status")) for r in live_results if r.F is None]
     assert len(with_f) >= math.ceil(0.95 * expected), (
-        f"live F for {len(with_f)} of {expected} pairs\n{log[-3000:]}"
+        f"live F for {len(with_f)} of {expected} pairs; unanswered stamps {unanswered}; "
+        f"answered without F {no_f}\n{log[-3000:]}"
     )
     errors = [r.error_px for r in with_f]
     assert all(r.F_gt is not None for r in with_f)

@@ -339,6 +339,28 @@ def test_overload_drops_frames_instead_of_queueing(stereo, images):
     assert answered + dropped == paired
 
 
+def test_pairs_delivered_together_to_an_idle_node_are_all_answered(stereo, images):
+    # A transport delay (a reliable reader recovering a lost fragment, a sender catching up)
+    # delivers two pairs at once to a node that is idle: it is not busy, so neither is dropped.
+    _, client = stereo
+    img_a, img_b = KITTI_STEREO[0]
+    left, right = images(img_a), images(img_b)
+    before = client.latest_health(after=0.0)
+    stamps = []
+    for _ in range(6):
+        time.sleep(0.6)  # the node is idle again
+        burst = [next_stamp(), next_stamp()]
+        for stamp in burst:
+            send_pair(client, image_msg(left, stamp), image_msg(right, stamp))
+        for stamp in burst:
+            client.wait_info(stamp, timeout=15.0)
+        stamps += burst
+    after = client.latest_health(after=1.2)
+    assert int(after["dropped_pairs"]) == int(before["dropped_pairs"])
+    with client.lock:
+        assert all(s in client.info for s in stamps)
+
+
 def test_motion_templering_and_kitti_consecutive_frames(motion, images, shared_data):
     _, client = motion
     before = client.latest_health(after=0.0)

@@ -1,7 +1,7 @@
 """Robustness report (issue 6): runs the robustness tests and writes their figures as Markdown.
 
     python benchmarks/bench_robustness.py [--fuzz-raw 10000] [--fuzz-compressed 3000]
-        [--overload-s 60] [--kill-trials 20] [--out docs/robustness.md]
+        [--overload-s 60] [--overload-runs 1] [--kill-trials 20] [--out docs/robustness.md]
 
 The default sizes are the issue's and the same as the default test run (CI runs these tests in
 full: test/test_robustness_live.py, test/test_robustness_bags.py, test/test_degeneracy.py);
@@ -9,6 +9,11 @@ larger values make longer soak runs. The tests print each figure as ``[robustnes
 through the environment variable SEPFM_ROBUSTNESS_REPORT, hand them to this script, which writes
 the report (default docs/robustness.md) and prints it. Exit code: pytest's (non-zero when a pass
 criterion failed; the report is written anyway).
+
+Issue 6's overload bound (end-to-end latency p95 under twice the unloaded p95) is a timing figure:
+the test asserts only that latency stays bounded (3x: no queue), and this report checks the 2x
+bound. ``--overload-runs N`` repeats the overload test N - 1 more times after the full run and
+tabulates every run against the bound (one 60 s run says little on a shared 2-core machine).
 """
 
 from __future__ import annotations
@@ -58,11 +63,56 @@ def render(figures: dict, header: str) -> str:
     return "\n".join(lines)
 
 
+OVERLOAD_BOUND = 2.0  # issue 6: loaded p95 < 2 x unloaded p95
+
+
+def overload_table(runs: list[dict]) -> str:
+    """Markdown table of repeated overload runs against the 2x bound."""
+    lines = [
+        "## Overload: repeated runs against the 2x latency bound",
+        "",
+        "| run | load (1 min) | processing rate Hz | p95 unloaded ms | p95 loaded ms | ratio "
+        "| node-side ratio | recovery answered | within 2x |",
+        "|---|---|---|---|---|---|---|---|---|",
+    ]
+    for k, r in enumerate(runs, 1):
+        ok = r["latency_p95_ratio"] < OVERLOAD_BOUND
+        lines.append(
+            f"| {k} | {r.get('load_average_1min', '?')} | {r.get('processing_rate_hz', '?')} "
+            f"| {r['latency_p95_ms_unloaded']} | {r['latency_p95_ms_loaded']} "
+            f"| {r['latency_p95_ratio']} | {r.get('node_latency_p95_ratio', '?')} "
+            f"| {r.get('recovery_pairs_answered', '?')}/{r.get('recovery_pairs_sent', '?')} "
+            f"| {'yes' if ok else 'NO'} |"
+        )
+    ratios = [r["latency_p95_ratio"] for r in runs]
+    within = sum(x < OVERLOAD_BOUND for x in ratios)
+    lines += [
+        "",
+        f"{within} of {len(runs)} runs within the bound; ratio min {min(ratios)}, "
+        f"median {sorted(ratios)[len(ratios) // 2]}, max {max(ratios)}. The node-side ratio "
+        "uses the node's own latency (receipt to publish, from ~/estimate_info), without the "
+        "sending and receiving test process.",
+        "",
+    ]
+    return "\n".join(lines)
+
+
+def _pytest(tests: list[str], env: dict, extra: list[str] = ()) -> subprocess.CompletedProcess:
+    return subprocess.run(
+        [sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider", *extra, *tests],
+        cwd=REPO,
+        env=env,
+        capture_output=True,
+        text=True,
+    )
+
+
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--fuzz-raw", type=int, default=10000)
     p.add_argument("--fuzz-compressed", type=int, default=3000)
     p.add_argument("--overload-s", type=float, default=60.0)
+    p.add_argument("--overload-runs", type=int, default=1, help="overload test runs in all")
     p.add_argument("--kill-trials", type=int, default=20)
     p.add_argument("--out", type=Path, default=REPO / "docs" / "robustness.md")
     args = p.parse_args(argv)
@@ -79,16 +129,22 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.monotonic()
         load_before = os.getloadavg()[0]
         # the degeneracy test prints its counts; capture them from pytest's output
-        res = subprocess.run(
-            [sys.executable, "-m", "pytest", "-q", "-s", "-p", "no:cacheprovider", *TESTS],
-            cwd=REPO,
-            env=env,
-            capture_output=True,
-            text=True,
-        )
-        elapsed = time.monotonic() - t0
+        res = _pytest(TESTS, env)
         sys.stderr.write(res.stdout[-4000:] + res.stderr[-2000:])
         figures = json.loads(report.read_text()) if report.is_file() else {}
+        overload_runs = [figures["overload"]] if "overload" in figures else []
+        returncode = res.returncode
+        for k in range(1, args.overload_runs):
+            one = Path(tmp) / f"overload{k}.json"
+            print(f"overload run {k + 1} of {args.overload_runs} ...", file=sys.stderr, flush=True)
+            again = _pytest(
+                [TESTS[0]], dict(env, SEPFM_ROBUSTNESS_REPORT=str(one)), ["-k", "overload"]
+            )
+            sys.stderr.write(again.stdout[-1500:])
+            returncode = returncode or again.returncode
+            if one.is_file():
+                overload_runs.append(json.loads(one.read_text())["overload"])
+        elapsed = time.monotonic() - t0
     plane = [line.split("] ", 1)[1] for line in res.stdout.splitlines() if "] plane check" in line]
     if plane:
         figures["dominant_plane_check"] = {f"scene {k + 1}": t for k, t in enumerate(plane)}
@@ -108,11 +164,13 @@ def main(argv: list[str] | None = None) -> int:
         "received)."
     )
     text = render(figures, header)
+    if overload_runs:
+        text += "\n" + overload_table(overload_runs)
     args.out.parent.mkdir(parents=True, exist_ok=True)
     args.out.write_text(text + "\n")
     print(text)
     print(f"\nwrote {args.out}", file=sys.stderr)
-    return res.returncode
+    return returncode
 
 
 if __name__ == "__main__":

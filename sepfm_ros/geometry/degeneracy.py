@@ -82,7 +82,7 @@ def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndar
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
     out = np.empty(len(pts1))
     for i in range(len(pts1)):

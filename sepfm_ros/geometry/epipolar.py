@@ -40,7 +40,7 @@ def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
     return r, l2, l1
 
 
-@numba.njit(cache=True, fastmath=False)
+@numba.njit(cache=True, nogil=True, fastmath=False)
 def _distance_one(f: np.ndarray, x: float, y: float, u: float, v: float) -> float:
     """Symmetric epipolar distance (px) of one correspondence (x, y) <-> (u, v) under F (3, 3)."""
     a2 = f[0, 0] * x + f[0, 1] * y + f[0, 2]  # F x1: line in image 2
@@ -56,7 +56,7 @@ def _distance_one(f: np.ndarray, x: float, y: float, u: float, v: float) -> floa
     return d if np.isfinite(d) else np.inf
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
     """(M, 3, 3) models, (>=2, N) pixel points -> (M, N) symmetric epipolar distances (px)."""
     M, N = F.shape[0], X1.shape[1]
@@ -68,7 +68,7 @@ def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarra
     return out
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def msac_kernel(
     F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -96,7 +96,7 @@ def msac_kernel(
     return cost, count
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def to_unit_norm(G: np.ndarray) -> bool:
     """Scale G (3, 3) in place to unit Frobenius norm; False (G unchanged) if zero or not finite."""
     n = 0.0
@@ -112,7 +112,7 @@ def to_unit_norm(G: np.ndarray) -> bool:
     return True
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
     """(3, 3) -> closest rank-2 matrix (Frobenius), scaled to unit norm.
 
@@ -157,7 +157,7 @@ def rank2_unit_kernel(F: np.ndarray) -> np.ndarray:
     return G
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def denormalize_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray, out: np.ndarray) -> bool:
     """out (3, 3) = T2^T F_n T1 at unit Frobenius norm; False (out undefined) if not finite/zero."""
     tmp = np.zeros((3, 3))
@@ -171,7 +171,7 @@ def denormalize_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray, out: np.
     return to_unit_norm(out)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def denormalize_unit_kernel(F_n: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
     """T2^T F_n T1 (3, 3) at unit Frobenius norm, largest-magnitude entry positive."""
     F = np.zeros((3, 3))
@@ -255,7 +255,7 @@ def fundamental_from_cameras(P1: np.ndarray, P2: np.ndarray) -> np.ndarray:
     return normalize_fundamental(F)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def hartley_kernel(pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(N, 2) pixels (N >= 1) -> (Hartley's T (3, 3), the points normalised by T (N, 2))."""
     n = pts.shape[0]

@@ -97,7 +97,7 @@ def _validate_size(size: Any, name: str) -> tuple[float, float]:
     return w, h
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _count_nonfinite(p1: np.ndarray, p2: np.ndarray) -> tuple[int, int]:
     """(number of rows of (N, 2) p1 / p2 with a NaN or inf, index of the first such row or -1)."""
     count, first = 0, -1
@@ -114,7 +114,7 @@ def _count_nonfinite(p1: np.ndarray, p2: np.ndarray) -> tuple[int, int]:
     return count, first
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _count_duplicates(p1: np.ndarray, p2: np.ndarray) -> tuple[int, int, int]:
     """(rows equal to an earlier row, and the first such pair (i < j) or (-1, -1)).
 
@@ -141,7 +141,7 @@ def _count_duplicates(p1: np.ndarray, p2: np.ndarray) -> tuple[int, int, int]:
     return count, fi, fj
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _principal_scatter(p: np.ndarray) -> tuple[float, float]:
     """(small, large) eigenvalues of the 2x2 scatter matrix (sum of outer products about the
     mean, px^2) of (N, 2) points."""
@@ -159,21 +159,21 @@ def _principal_scatter(p: np.ndarray) -> tuple[float, float]:
     return max(0.0, (a * c - b * b) / big), big  # det / big = the small eigenvalue
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _spread_ratio(p: np.ndarray) -> float:
     """Smallest / largest eigenvalue of the 2x2 scatter matrix of (N, 2) points (0: collinear)."""
     small, big = _principal_scatter(p)
     return small / big if big > 0 else 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _across_std(p: np.ndarray) -> float:
     """Standard deviation (px) of (N >= 2, 2) points across their principal axis."""
     small, _ = _principal_scatter(p)
     return np.sqrt(small / (p.shape[0] - 1))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _median_motion(p1: np.ndarray, p2: np.ndarray) -> float:
     """Median over correspondences of ||p2 - p1|| (px)."""
     d = np.empty(p1.shape[0])

@@ -19,7 +19,7 @@ from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 SCORINGS = ("msac", "lmeds")
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven):
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 

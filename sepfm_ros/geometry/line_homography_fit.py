@@ -51,7 +51,7 @@ class LineHomographyFit:
         return p1, p2
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _trials_needed(count: int, n: int, confidence: float, cap: int) -> int:
     """F(3, r) for inlier ratio count / n, capped (as ransac.ransac_trials with max_trials)."""
     w = min(1.0, count / n) if n > 0 else 0.0
@@ -66,7 +66,7 @@ def _trials_needed(count: int, n: int, confidence: float, cap: int) -> int:
     return max(1, min(cap, int(np.ceil(np.log1p(-confidence) / denom))))
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def transfer_errors(
     h: np.ndarray, t1: np.ndarray, t2: np.ndarray, len1: float, len2: float, out: np.ndarray
 ) -> None:
@@ -83,7 +83,7 @@ def transfer_errors(
         out[i] = e if np.isfinite(e) else np.inf
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _msac(err: np.ndarray, threshold: float) -> tuple[float, int]:
     """Truncated quadratic cost sum(min(e^2, T^2)) and inlier count (e < T) of (K,) errors."""
     t2 = threshold * threshold
@@ -96,7 +96,7 @@ def _msac(err: np.ndarray, threshold: float) -> tuple[float, int]:
     return cost, count
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def stage1_ransac(
     t1: np.ndarray,
     t2: np.ndarray,

@@ -88,7 +88,7 @@ def hough_lines(
     return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def binary_image_pixels(pts: np.ndarray, scale: float, w: int, h: int) -> np.ndarray:
     """The set pixels of the binary image of (N, 2) points at ``scale`` in a w x h image.
 
@@ -127,7 +127,7 @@ def incidence(
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _incidence(pts: np.ndarray, lines: np.ndarray, dist: float) -> np.ndarray:
     """(N, L) bool: |a u + b v + c| < dist (px of the image) for points (N, 2), lines (L, 3)."""
     out = np.empty((len(pts), len(lines)), dtype=np.bool_)
@@ -170,7 +170,7 @@ def find_line_pairs(
     ]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def rank_line_pairs(
     I1: np.ndarray, I2: np.ndarray, min_votes: int, max_pairs: int
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -252,7 +252,7 @@ def control_points(line: np.ndarray, image_size: tuple[float, float]) -> np.ndar
     return _control_points(a, b, c, float(image_size[0]) - 1.0, float(image_size[1]) - 1.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _control_points(a: float, b: float, c: float, w: float, h: float) -> np.ndarray:
     """:func:`control_points` of line (a, b, c) in [0, w] x [0, h], compiled."""
     P = np.empty((4, 2))

@@ -99,7 +99,7 @@ class RansacResult:
     converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _floyd_samples(u: np.ndarray, P: int) -> np.ndarray:
     """(b, k) distinct indices in [0, P) per row from (b, k) uniforms in [0, 1) (Floyd's method).
 

@@ -22,7 +22,7 @@ from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
 REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _gram(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
     """9x9 Gram matrix sum_k w_k^2 r_k r_k^T of the design rows r = kron([x2, 1], [x1, 1]).
 
@@ -38,7 +38,7 @@ def _gram(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.
     return G
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _solve_gram(G: np.ndarray) -> np.ndarray:
     """Rank-2 unit-norm F_n (3, 3): the eigenvector of the smallest eigenvalue of G (9, 9)."""
     _, vecs = np.linalg.eigh(G)
@@ -48,7 +48,7 @@ def _solve_gram(G: np.ndarray) -> np.ndarray:
     return rank2_unit_kernel(F)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.ndarray):
     """(K,) 1 / ||grad(x2^T F x1)|| (the Sampson denominator) of rows idx, scaled to max 1."""
     K = idx.shape[0]
@@ -66,7 +66,7 @@ def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.nd
     return w / w.max()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2) -> np.ndarray:
     """Normalised eight-point least squares on rows idx (+ Sampson IRLS); F in px, unit norm."""
     F_n = _solve_gram(_gram(x1, x2, idx, np.ones(idx.shape[0])))
@@ -75,7 +75,7 @@ def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2) -> np.ndarray:
     return denormalize_unit_kernel(F_n, T1, T2)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_iterations):
     """See :func:`iterative_refit`; returns (K, 3, 3) fitted models, K <= len(factors)."""
     t2 = threshold * threshold

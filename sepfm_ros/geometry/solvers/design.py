@@ -6,7 +6,7 @@ import numba
 import numpy as np
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def design_row(x: float, y: float, u: float, v: float, r: np.ndarray) -> None:
     """Write into r (9,) the row of x2^T F x1 = 0 in vec(F) (row-major) for (x, y) <-> (u, v).
 
@@ -17,7 +17,7 @@ def design_row(x: float, y: float, u: float, v: float, r: np.ndarray) -> None:
     r[6], r[7], r[8] = x, y, 1.0
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def add_outer(G: np.ndarray, r: np.ndarray, weight: float) -> None:
     """G (9, 9) upper triangle += weight r r^T (symmetrise with :func:`symmetrize` at the end)."""
     for p in range(9):
@@ -26,7 +26,7 @@ def add_outer(G: np.ndarray, r: np.ndarray, weight: float) -> None:
             G[p, q] += rp * r[q]
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def symmetrize(G: np.ndarray) -> None:
     """Copy the upper triangle of G (9, 9) to the lower."""
     for p in range(9):
@@ -34,7 +34,7 @@ def symmetrize(G: np.ndarray) -> None:
             G[p, q] = G[q, p]
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def null_basis(A: np.ndarray, basis: np.ndarray) -> bool:
     """Orthonormal basis of the null space of A (K, 9), K < 9 rows of full rank K.
 

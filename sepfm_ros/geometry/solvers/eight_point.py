@@ -9,7 +9,7 @@ from sepfm_ros.geometry.epipolar import rank2_unit_kernel
 from sepfm_ros.geometry.solvers.design import add_outer, design_row, null_basis, symmetrize
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def eight_point_kernel(x1: np.ndarray, x2: np.ndarray, w: np.ndarray) -> np.ndarray:
     """(M, K, 2) normalised samples, (M, K) row weights -> (M, 3, 3) rank-2 unit-norm F.
 

@@ -68,14 +68,14 @@ def transfer(H: np.ndarray, t: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 
 
-@numba.njit(cache=True, inline="always")
+@numba.njit(cache=True, nogil=True, inline="always")
 def _row_kernel(t1: float, t2: float, row: np.ndarray) -> None:
     """Row (4,) of :func:`_rows` for line parameters t1 -> t2 ((alpha, beta) = (1 - t, t))."""
     a1, b1, a2, b2 = 1.0 - t1, t1, 1.0 - t2, t2
     row[0], row[1], row[2], row[3] = -b2 * a1, -b2 * b1, a2 * a1, a2 * b1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def line_homography_3pt_kernel(t1: np.ndarray, t2: np.ndarray, out: np.ndarray) -> None:
     """Minimal solver on line parameters: 3 correspondences t1[i] -> t2[i] into out (4,).
 
@@ -105,7 +105,7 @@ def line_homography_3pt_kernel(t1: np.ndarray, t2: np.ndarray, out: np.ndarray) 
         out[j] = out[j] / norm if norm > 0.0 else 0.0
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def line_homography_lsq_kernel(t1: np.ndarray, t2: np.ndarray, mask: np.ndarray) -> np.ndarray:
     """Least-squares H_e (4,) on the correspondences where mask is True (unit norm).
 
@@ -125,7 +125,7 @@ def line_homography_lsq_kernel(t1: np.ndarray, t2: np.ndarray, mask: np.ndarray)
     return vt[3].copy()
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def transfer_kernel(a: float, b: float, c: float, d: float, t: float) -> float:
     """t' of t under H = [[a, b], [c, d]] ((alpha, beta) = (1 - t, t)); inf at infinity."""
     alpha = a + (b - a) * t

@@ -12,7 +12,7 @@ _S = np.array([0.0, 1.0, -1.0, 2.0])
 _VANDER_INV = np.linalg.inv(np.vander(_S, 4))  # rows: s^3, s^2, s, 1
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _det_pencil(f2: np.ndarray, d: np.ndarray, s: float) -> float:
     """det(F2 + s D) of row-major (9,) F2 and D."""
     a = np.empty(9)
@@ -25,7 +25,7 @@ def _det_pencil(f2: np.ndarray, d: np.ndarray, s: float) -> float:
     )
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> int:
     """Real-root models of one sample's (K, 9) design rows into out (3, 9); returns how many.
 
@@ -78,7 +78,7 @@ def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> 
     return n
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def seven_point_kernel(x1: np.ndarray, x2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(M, K, 2) normalised samples -> (F (<= 3M, 3, 3) unit norm, sample index of each)."""
     M, K = x1.shape[0], x1.shape[1]

@@ -728,7 +728,7 @@ def test_dds_peer_started_and_killed_repeatedly_does_not_disturb_node(robust, fr
 
 # --------------------------------------------------------------------------- overload
 OVERLOAD_S = float(os.environ.get("SEPFM_OVERLOAD_S", 60.0))
-UNLOADED_PAIRS = 150  # for the unloaded latency p95 (with 50 its p95 was the 3rd-worst value: noisy)
+UNLOADED_PAIRS = 150  # unloaded latency p95 (of 50 pairs it was the 3rd-worst value: noisy)
 SATURATE_S = 8.0  # input well above the node's rate, to measure that rate
 RECOVERY_S = 10.0
 

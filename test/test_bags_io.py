@@ -98,6 +98,21 @@ def test_writer_never_leaves_a_folder_that_is_no_bag(tmp_path, monkeypatch):
         assert r.message_count == 0
 
 
+def test_writer_removes_what_a_killed_writer_left(tmp_path):
+    # a writer killed before the rename leaves its hidden folder; writing the name again removes
+    # it, but never the folder of a writer that is still running
+    dead = subprocess.Popen([sys.executable, "-c", "pass"])
+    dead.wait()
+    stale = tmp_path / f".b.creating-{dead.pid}-0123abcd"
+    live = tmp_path / f".b.creating-{os.getpid()}-0123abcd"
+    other = tmp_path / f".c.creating-{dead.pid}-0123abcd"
+    for d in (stale, live, other):
+        d.mkdir()
+    with BagWriter(tmp_path / "b", flush_interval_s=None) as w:
+        w.add_topic("/a", "std_msgs/msg/String")
+    assert not stale.exists() and live.exists() and other.exists()
+
+
 def test_header_stamp_from_cdr():
     assert header_stamp_ns(_image(12.25)) == 12_250_000_000
 

@@ -290,6 +290,37 @@ def _fsync_dir(path: Path) -> None:
         os.close(fd)
 
 
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # alive, another user's
+        return True
+    return True
+
+
+def remove_stale_scratch(final: Path) -> list[Path]:
+    """Remove the hidden ``.NAME.creating-<pid>-*`` siblings of ``final`` whose process is gone.
+
+    Such a folder is what a writer killed in its first milliseconds leaves (before the bag got
+    its name, so before anything was written to it). Folders of live processes are kept.
+    Returns the removed paths.
+    """
+    removed = []
+    prefix = f".{final.name}.creating-"
+    if not final.parent.is_dir():
+        return removed
+    for entry in final.parent.iterdir():
+        if not entry.name.startswith(prefix) or not entry.is_dir():
+            continue
+        pid_text = entry.name[len(prefix) :].split("-", 1)[0]
+        if pid_text.isdigit() and not _pid_alive(int(pid_text)):
+            shutil.rmtree(entry, ignore_errors=True)
+            removed.append(entry)
+    return removed
+
+
 @dataclass
 class _Topic:
     name: str
@@ -322,7 +353,9 @@ class BagWriter:
         final = check_output_path(path)
         # the bag appears only complete: built as a hidden sibling with an empty metadata.yaml,
         # then renamed (a SIGKILL between mkdir and the first metadata left a folder that is no
-        # bag; a kill now leaves either nothing under the name or a readable empty bag)
+        # bag; a kill now leaves either nothing under the name or a readable empty bag). What
+        # such a kill left behind is removed when the name is written again.
+        remove_stale_scratch(final)
         scratch = final.with_name(f".{final.name}.creating-{os.getpid()}-{secrets.token_hex(4)}")
         try:
             scratch.mkdir(parents=True)

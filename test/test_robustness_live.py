@@ -12,6 +12,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -733,6 +734,12 @@ SATURATE_S = 8.0  # input well above the node's rate, to measure that rate
 RECOVERY_S = 10.0
 
 
+def cpu_seconds(pid: int) -> float:
+    """User + system CPU time of process ``pid`` so far, s (from /proc)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def _paced(client, frames, rate_hz, seconds, sent_at, rss_pid=None, rss=None, skipped=None):
     """Send pairs at ``rate_hz`` for ``seconds``, like a camera: a send slot this process missed
     by more than half a period (a stall of the test process) is skipped, not sent late in a
@@ -788,10 +795,12 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     rate = max(saturated_rate, sequential_rate)
     before = client.latest_health(after=0.0)
     rss = [round(rss_mb(proc.proc.pid), 1)]
+    cpu0 = (cpu_seconds(proc.proc.pid), cpu_seconds(os.getpid()), time.monotonic())
     skipped_loaded: list[int] = []
     loaded = _paced(
         client, frames, 2.0 * rate, OVERLOAD_S, sent_at, proc.proc.pid, rss, skipped_loaded
     )
+    cpu1 = (cpu_seconds(proc.proc.pid), cpu_seconds(os.getpid()), time.monotonic())
     time.sleep(1.0)
     rss.append(round(rss_mb(proc.proc.pid), 1))
     mid = client.latest_health(after=1.2)
@@ -846,6 +855,10 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
             for phase, ss in (("unloaded", stamps), ("loaded", loaded))
             if (v := list(stage_ms(client, ss, key).values()))
         },
+        # CPU while loaded, in cores: the node process, and this test process (sending twice
+        # the processing rate and receiving the answers) on the same 2 cores
+        cpu_cores_node_loaded=round((cpu1[0] - cpu0[0]) / (cpu1[2] - cpu0[2]), 2),
+        cpu_cores_test_process_loaded=round((cpu1[1] - cpu0[1]) / (cpu1[2] - cpu0[2]), 2),
         outside_node_ms_loaded=[round(float(np.percentile(outside, q)), 1) for q in (50, 95)],
         load_average_1min=round(os.getloadavg()[0], 2),
         latency_max_ms_loaded=round(max(lat_loaded), 1),

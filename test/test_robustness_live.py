@@ -818,6 +818,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     paired = int(mid["synchronized_pairs"]) - int(before["synchronized_pairs"])
     dropped_recovery = int(after["dropped_pairs"]) - int(mid["dropped_pairs"])
     p95_loaded = float(np.percentile(lat_loaded, 95))
+    p95_half_rate = float(np.percentile(lat_recovery, 95))
     node_lat = stage_ms(client, loaded, "latency")
     node_lat_unloaded = list(stage_ms(client, stamps, "latency").values())
     node_p95_unloaded = float(np.percentile(node_lat_unloaded, 95))
@@ -871,10 +872,8 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
         recovery_pairs_reaching_node=paired_recovery,
         # a second unloaded reference: a steady stream at half the processing rate (the
         # recovery phase; the sender runs meanwhile) instead of one pair at a time
-        latency_p95_ms_half_rate=round(float(np.percentile(lat_recovery, 95)), 1),
-        latency_p95_ratio_to_half_rate=round(
-            p95_loaded / float(np.percentile(lat_recovery, 95)), 2
-        ),
+        latency_p95_ms_half_rate=round(p95_half_rate, 1),
+        latency_p95_ratio_to_half_rate=round(p95_loaded / p95_half_rate, 2),
         recovery_unanswered_indices=unanswered_recovery,
         sender_slots_skipped_loaded=len(skipped_loaded),
         sender_slots_skipped_recovery=skipped_recovery,
@@ -883,9 +882,10 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     assert rss[-1] - rss[0] < RSS_LIMIT_MB
     # Issue 6's bound, p95_loaded < 2 x p95_unloaded, is a timing figure: it is measured over
     # repeated runs by benchmarks/bench_robustness.py --overload-runs N (docs/robustness.md;
-    # 1.6-1.9 on a quiet 2-core machine, where the sending test process shares the cores), not
-    # asserted by this test. What is asserted: latency stays bounded under overload (no queue:
-    # a queue would grow without bound over the 60 s), within 3x the unloaded p95.
+    # 0.98-2.43, median 1.82, over 25 runs on 2026-11-23 on a 2-core machine shared with the
+    # sending test process), not asserted by this test. What is asserted: latency stays
+    # bounded under overload (no queue: a queue would grow without bound over the 60 s), within
+    # 3x the unloaded p95.
     assert p95_loaded < 3.0 * p95_unloaded
     assert dropped > 0 and len(lat_loaded) + dropped == paired
     assert len(lat_recovery) == len(recovery) and dropped_recovery == 0, (

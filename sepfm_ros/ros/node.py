@@ -9,7 +9,7 @@ dropped, so nothing queues without bound. The one exception: a pair that arrives
 thread is idle (waiting for input) is owed an answer and is never replaced; the next pairs queue
 behind it in the slot. Without it, two pairs delivered together after a transport delay (a
 reliable DDS reader recovering a lost fragment, a sender catching up after a hiccup) lost the
-first one although the node was idle: in 1 of 75 pairs of KITTI stereo at 5 Hz, and 3 of 20
+first one although the node was idle: 2-4 of 150 pairs of KITTI stereo at 5 Hz, and 3 of 20
 pairs of a bag replay on a loaded CI machine. Two worker threads then run the
 :class:`~sepfm_ros.pipeline.pipeline.Pipeline` one pair apart, like a two-stage assembly line:
 

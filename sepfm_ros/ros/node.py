@@ -4,13 +4,13 @@ Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair stereo stamps (:mod:`sepfm_ros.ros.sync`) and put the newest pair into a one-element
-input slot. A pair still waiting there when a newer one arrives is replaced and counted as
-dropped, so nothing queues without bound. The one exception: a pair that arrives while the match
-thread is idle (waiting for input) is owed an answer and is never replaced; the next pairs queue
-behind it in the slot. Without it, two pairs delivered together after a transport delay (a
-reliable DDS reader recovering a lost fragment, a sender catching up after a hiccup) lost the
-first one although the node was idle: 2-4 of 150 pairs of KITTI stereo at 5 Hz, and 3 of 20
-pairs of a bag replay on a loaded CI machine. Two worker threads then run the
+input slot. A pair still waiting there when a newer one arrives is replaced and counted as dropped,
+so nothing queues without bound. The one exception: a pair that arrives while the node is idle, or
+keeps up and its match thread is idle (waiting for input), is owed an answer and is never replaced;
+the next pairs queue behind it in the slot. Without it, two pairs delivered together after a
+transport delay (a reliable DDS reader recovering a lost fragment, a sender catching up after a
+hiccup) lost the first one although the node was idle: 2-4 of 150 pairs of KITTI stereo at 5 Hz,
+and 3 of 20 pairs of a bag replay on a loaded CI machine. Two worker threads then run the
 :class:`~sepfm_ros.pipeline.pipeline.Pipeline` one pair apart, like a two-stage assembly line:
 
 - ``sepfm-match`` takes the newest pair from the input slot, decodes the images, detects features
@@ -21,21 +21,31 @@ pairs of a bag replay on a loaded CI machine. Two worker threads then run the
   ``max_samples`` parameter caps its RANSAC samples, so a pair without consensus (a few dozen
   matches, most of them wrong) cannot hold it for long.
 
-When saturated (a pair already waits when the estimator starts), the match thread starts the next
-pair only when the estimator's expected remaining time (recent median of its duration) is down to a
-few milliseconds, so a pair's two stages run almost one after the other and do not compete with
-each other (the executor and the sender still take their share). Matching pair n+1 during all of
-pair n's estimation (as before 2026-11-22) answered a few more pairs per second when saturated but
-ran the two stages, the executor and the sender on two cores at once, each stage about twice as
-slow: under input at twice the processing rate the p95 latency was 65-83 ms (2.1-3.5x its unloaded
-value), with the hand-off 47-65 ms (1.4-2.8x, the ratio set mostly by the unloaded p95). While
-pairs arrive faster than the node processes them and the pair waiting in the slot is already older
-than half the input period, the match thread waits for the next one (expected within the other
-half, and at most a quarter of a pair's processing time): its answer comes out at about the same
-time and fresher. Each pair goes through exactly the calls of :meth:`Pipeline.process` with the
-config it was matched with, so the results equal offline processing. Threads of our own are used
-rather than a MultiThreadedExecutor because the latest-only slots are needed anyway and running
-several estimations at once on 2 cores would only raise everyone's latency.
+While the node keeps up (pairs arrive no faster than it processes them), a pair that comes while
+the previous one is being estimated is matched from a few milliseconds before the estimator is
+expected to finish (recent median of its duration), so the two stages overlap only briefly.
+While saturated (recent mean input period below the recent median matching plus estimation
+time, :func:`is_saturated`) the node serves the freshest pair with the least contention:
+
+- a pair's two stages run one after the other, never overlapping: matching pair n+1 during pair
+  n's estimation (as before 2026-11-23) ran both stages, the executor and the sender on 2 cores at
+  once, each stage slower (estimation p95 15-17 ms against 10-12 ms one after the other);
+- the match thread starts on the pair in the slot only if it is at most a quarter of the input
+  period old; otherwise it waits for the next pair (:func:`fresher_pair_wait`): that answer comes
+  out at about the same time and is a period fresher. Taking whatever waited in the slot made the
+  pair's age when taken p95 10-13 ms (one period) under input at twice the processing rate; now
+  p95 2 ms;
+- the owed-pair rule above holds only while the node is wholly idle (pairs are dropped anyway; a
+  burst then keeps its newest).
+
+With both, the p95 latency under input at twice the processing rate fell from 1.46-2.03x its
+unloaded value (7 runs) to 1.09-1.32x (4 runs), answering about a tenth fewer of them
+(2424-2799 against 2730-3086 a minute; 2026-11-23).
+
+Each pair goes through exactly the calls of :meth:`Pipeline.process` with the config it was matched
+with, so the results equal offline processing. Threads of our own are used rather than a
+MultiThreadedExecutor because the latest-only slots are needed anyway and running several
+estimations at once on 2 cores would only raise everyone's latency.
 
 For the same reason :func:`limit_thread_pools` keeps the native thread pools to one thread each:
 OpenCV's own pool and numpy's OpenBLAS, whose idle workers otherwise spin on the second core
@@ -189,13 +199,15 @@ PARAMS: dict[str, ParamSpec] = {
     ),
 }
 
-# The match thread starts this much before the estimator is expected to finish, and never waits
-# longer than MAX_MATCH_DELAY_S for the estimator (see _match_start_delay).
+# While the node keeps up, the match thread starts this much before the estimator is expected to
+# finish; it never waits longer than MAX_MATCH_DELAY_S at a time (see _match_start_delay).
 MATCH_START_MARGIN_S = 0.004
 MAX_MATCH_DELAY_S = 0.05
-# Waiting for a fresher pair (see _fresher_pair_delay) costs at most this share of the expected
-# processing time of a pair.
-MAX_FRESHER_WAIT_SHARE = 0.25
+# While saturated (see fresher_pair_wait): a pair is fresh enough to start on when its age is at
+# most this share of the input period; otherwise the next pair is awaited until it is due plus
+# this share of the period (its arrival jitters), and the stale pair is taken if none comes.
+FRESH_AGE_SHARE = 0.25
+FRESHER_WAIT_SLACK_SHARE = 0.5
 
 # How often input silence is checked (a change of the health level is reported at once).
 STALL_CHECK_PERIOD_S = 0.1
@@ -292,6 +304,27 @@ class RecentMedian:
         self.value = statistics.median(self._values)
 
 
+class RecentPeriod:
+    """Mean time between the last few events (seconds): the input period. A mean over a span,
+    not a median of intervals, so that pairs delivered in bursts (two at once after a transport
+    delay) do not pass for a fast input."""
+
+    def __init__(self, size: int = 9, warmup: int = 4) -> None:
+        self._times: deque[float] = deque(maxlen=size)
+        self._warmup = warmup
+        self.value = 0.0
+
+    @property
+    def ready(self) -> bool:
+        return len(self._times) >= self._warmup
+
+    def add(self, t: float) -> None:
+        """Record an event at monotonic time ``t`` (s)."""
+        self._times.append(t)
+        if len(self._times) > 1:
+            self.value = (self._times[-1] - self._times[0]) / (len(self._times) - 1)
+
+
 @dataclass
 class MatchedJob:
     """A matched pair waiting for the estimate thread."""
@@ -312,6 +345,30 @@ def limit_thread_pools(threads: int = 1) -> None:
     """
     cv2.setNumThreads(int(threads))
     threadpool_limits(limits=int(threads), user_api="blas")
+
+
+def is_saturated(period_s: float, processing_s: float) -> bool:
+    """True when pairs arrive faster than the node processes them one after the other.
+
+    Args:
+        period_s: recent median time between input pairs, s.
+        processing_s: recent median time of a pair's matching plus estimation, s.
+    """
+    return period_s < processing_s
+
+
+def fresher_pair_wait(age_s: float, period_s: float) -> float:
+    """Seconds to wait for the next input pair instead of starting on a pair ``age_s`` old.
+
+    For a saturated node (pairs are dropped anyway): a pair at most FRESH_AGE_SHARE of the
+    input period ``period_s`` old is taken at once (0.0); an older one is passed over until the
+    next pair is due, plus FRESHER_WAIT_SLACK_SHARE of a period for its arrival jitter. The
+    latency of an answer counts from the receipt of its pair, so an answer to the next pair
+    comes out at about the same time as one to the stale pair would, but a period fresher.
+    """
+    if age_s <= FRESH_AGE_SHARE * period_s:
+        return 0.0
+    return max(period_s - age_s, 0.0) + FRESHER_WAIT_SLACK_SHARE * period_s
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -341,8 +398,7 @@ class SepfmNode(Node):
         self._estimating_since: float | None = None  # monotonic start of the current estimate
         self._match_s = RecentMedian()  # seconds per stage, to time the start of matching
         self._estimate_s = RecentMedian()
-        self._period_s = RecentMedian()  # seconds between offered pairs (the input period)
-        self._last_offer: float | None = None
+        self._period_s = RecentPeriod()  # seconds between offered pairs (the input period)
         self._passed_over: Job | None = None  # a pair kept waiting for a fresher one, once
         self._stop = False
         self._pending_config: PipelineConfig | None = None
@@ -496,10 +552,9 @@ class SepfmNode(Node):
 
     def _offer(self, job: Job) -> None:
         with self._cond:
-            if self._last_offer is not None:
-                self._period_s.add(job.received - self._last_offer)
-            self._last_offer = job.received
-            if self._match_idle and self._owed is None:
+            self._period_s.add(job.received)
+            idle = self._match_idle and self._estimating_since is None
+            if self._match_idle and self._owed is None and (idle or not self._saturated()):
                 self._owed = job  # answered even if newer pairs arrive before it is taken
                 self._match_idle = False
             else:
@@ -600,15 +655,27 @@ class SepfmNode(Node):
                 self._matched = matched
                 self._cond.notify_all()
 
+    def _saturated(self) -> bool:
+        """:func:`is_saturated` on the recent medians (False until they are known). Caller holds
+        the lock."""
+        if not (self._period_s.ready and self._match_s.ready and self._estimate_s.ready):
+            return False
+        return is_saturated(self._period_s.value, self._match_s.value + self._estimate_s.value)
+
     def _match_start_delay(self, now: float) -> float:
         """Seconds the match thread should still wait before taking the newest pair (<= 0: go).
 
-        Matching a pair long before the estimator is free only makes the pair older when it is
-        estimated: the match thread starts when the estimator's expected remaining time (running
-        medians of both stages) drops to the expected matching time, plus a margin so that the
-        estimator does not wait for it. Caller holds the lock.
+        Saturated: not before the estimator is done (it notifies), so that a pair's two stages
+        never compete for the cores. Keeping up (a pair came while the previous one is being
+        estimated): the match thread starts a margin before the estimator's expected end
+        (running median of its duration), so that the estimator does not wait for it and the
+        two overlap only briefly. Caller holds the lock.
         """
-        if self._estimating_since is None or not self._estimate_s.ready:
+        if self._estimating_since is None:
+            return 0.0
+        if self._saturated():
+            return MAX_MATCH_DELAY_S
+        if not self._estimate_s.ready:
             return 0.0
         remaining = self._estimate_s.value - (now - self._estimating_since)
         return min(remaining - MATCH_START_MARGIN_S, MAX_MATCH_DELAY_S)
@@ -616,30 +683,17 @@ class SepfmNode(Node):
     def _fresher_pair_delay(self, now: float) -> float:
         """Seconds to wait for a pair newer than the one in the slot (<= 0: take this one).
 
-        Under overload the slot's pair is up to one input period old when the match thread
-        frees up. When it is older than half the (regular) input period, the next pair is due
-        within the other half: waiting for it delays the answer by that much but makes it a
-        period fresher. Only while pairs arrive faster than the node processes them (then pairs
-        are dropped anyway; at a rate the node keeps up with, every pair is answered, even one
-        that waited behind a slow pair), while the input period is known, and when the wait is
-        short against a pair's processing time; a pair is passed over once (if no newer one
-        comes, it is processed after the wait). Caller holds the lock.
+        Only while saturated (:func:`fresher_pair_wait`; at a rate the node keeps up with, every
+        pair is answered, even one that waited behind a slow pair). A pair is passed over once:
+        if no newer one comes, it is processed after the wait. Caller holds the lock.
         """
         job = self._slot
-        if job is None or job is self._passed_over:
+        if job is None or job is self._passed_over or not self._saturated():
             return 0.0
-        if not (self._period_s.ready and self._match_s.ready and self._estimate_s.ready):
-            return 0.0
-        period = self._period_s.value
-        processing = self._match_s.value + self._estimate_s.value
-        if period >= processing:
-            return 0.0  # the node keeps up: every pair is answered, none passed over
-        age = now - job.received
-        due = period - age  # the next pair's expected arrival, from now
-        if not (age > 0.5 * period and 0.0 < due <= MAX_FRESHER_WAIT_SHARE * processing):
-            return 0.0
-        self._passed_over = job
-        return due + 0.001
+        wait = fresher_pair_wait(now - job.received, self._period_s.value)
+        if wait > 0.0:
+            self._passed_over = job
+        return wait
 
     def _estimate_loop(self) -> None:
         """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
@@ -763,6 +817,10 @@ class SepfmNode(Node):
             values["output_subscribers"] = min(
                 p.get_subscription_count() for p in (self._pub_f, self._pub_matches, self._pub_info)
             )
+            # ~/debug_image is drawn (on the estimate thread, after the answer) only for these
+            values["debug_image_subscribers"] = self._pub_debug.get_subscription_count()
+            # pairs arrive faster than processed: the freshest are served, the rest dropped
+            values["saturated"] = self._saturated()
             values["output_rate_hz"] = (self._published - published_last) / dt
             values["published"] = self._published
             values["estimation_not_ok"] = self._failed

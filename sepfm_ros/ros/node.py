@@ -39,8 +39,8 @@ time, :func:`is_saturated`) the node serves the freshest pair with the least con
   burst then keeps its newest).
 
 With both, the p95 latency under input at twice the processing rate fell from 1.46-2.03x its
-unloaded value (7 runs) to 1.09-1.32x (4 runs), answering about a tenth fewer of them
-(2424-2799 against 2730-3086 a minute; 2026-11-23).
+unloaded value (7 runs) to 1.03-1.69x (12 runs, median 1.28), answering about a tenth fewer
+pairs (2424-2799 against 2730-3086 a minute; 2026-11-23).
 
 Each pair goes through exactly the calls of :meth:`Pipeline.process` with the config it was matched
 with, so the results equal offline processing. Threads of our own are used rather than a

@@ -351,7 +351,7 @@ def is_saturated(period_s: float, processing_s: float) -> bool:
     """True when pairs arrive faster than the node processes them one after the other.
 
     Args:
-        period_s: recent median time between input pairs, s.
+        period_s: recent mean time between input pairs, s.
         processing_s: recent median time of a pair's matching plus estimation, s.
     """
     return period_s < processing_s
@@ -553,8 +553,8 @@ class SepfmNode(Node):
     def _offer(self, job: Job) -> None:
         with self._cond:
             self._period_s.add(job.received)
-            idle = self._match_idle and self._estimating_since is None
-            if self._match_idle and self._owed is None and (idle or not self._saturated()):
+            node_idle = self._estimating_since is None
+            if self._match_idle and self._owed is None and (node_idle or not self._saturated()):
                 self._owed = job  # answered even if newer pairs arrive before it is taken
                 self._match_idle = False
             else:
@@ -656,7 +656,7 @@ class SepfmNode(Node):
                 self._cond.notify_all()
 
     def _saturated(self) -> bool:
-        """:func:`is_saturated` on the recent medians (False until they are known). Caller holds
+        """:func:`is_saturated` on the recent timings (False until they are known). Caller holds
         the lock."""
         if not (self._period_s.ready and self._match_s.ready and self._estimate_s.ready):
             return False

@@ -113,7 +113,7 @@ def thread_line(before: dict[str, float], after: dict[str, float], pairs: int) -
 
 def node_values(args) -> dict:
     """The node's parameter values for this run: its defaults with the command-line changes."""
-    from sepfm_ros.ros.node import PARAMS
+    from sepfm_ros.ros.parameters import PARAMS
 
     values = {name: spec.default for name, spec in PARAMS.items()}
     values.update(features=args.features, max_features=args.max_features, method=args.method)

@@ -59,7 +59,7 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
-from sepfm_ros.ros.node import PARAMS, parameter_error, pipeline_config
+from sepfm_ros.ros.parameters import PARAMS, parameter_error, pipeline_config
 from sepfm_ros.ros.replay import raise_keyboard_interrupt
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,

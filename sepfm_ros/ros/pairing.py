@@ -1,0 +1,128 @@
+"""Which two frames make a pair: stereo pairing by stamp, motion pairing by frame gap, and the
+reset when the input's stamps jump back. Pure Python, no ROS.
+
+A stamp that goes back by more than ``jump_back_s`` (a looped bag, a camera driver restart, a
+simulator reset) starts the pairing afresh from that frame, instead of dropping every later frame
+as late. A smaller step back is a reordered or repeated frame and is skipped as before.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from dataclasses import dataclass
+from typing import Generic, TypeVar
+
+from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+
+T = TypeVar("T")
+
+NS_PER_S = 1_000_000_000
+
+
+@dataclass
+class Frame(Generic[T]):
+    """An input frame: its item (message and receipt time) and stamp (ns)."""
+
+    item: T
+    stamp_ns: int
+
+
+@dataclass
+class PairOutcome(Generic[T]):
+    """What one added frame did: the pair it completed (a, b), if any, and whether it reset
+    the pairing (stamps jumped back) or was skipped as late (stamp not after the last)."""
+
+    pair: tuple[Frame[T], Frame[T]] | None = None
+    reset: bool = False
+    late: bool = False
+
+
+class StereoPairing(Generic[T]):
+    """Left/right frames paired by stamp (:class:`ApproximateTimeSync`), reset on a jump back.
+
+    Args:
+        slop_ns: largest stamp difference of a pair, ns.
+        queue_size: unpaired frames kept per side.
+        jump_back_s: a stamp this much older than the newest seen resets the pairing, s.
+    """
+
+    def __init__(self, slop_ns: int, queue_size: int, jump_back_s: float = 1.0) -> None:
+        self._sync: ApproximateTimeSync[Frame[T]] = ApproximateTimeSync(slop_ns, queue_size)
+        self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
+        self._newest: int | None = None
+        self._recent: tuple[deque[int], deque[int]] = (deque(maxlen=8), deque(maxlen=8))
+
+    @property
+    def stats(self):
+        return self._sync.stats
+
+    def configure(self, slop_ns: int, queue_size: int, jump_back_s: float) -> None:
+        self._sync.configure(slop_ns, queue_size)
+        self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
+
+    def offset_ns(self) -> int | None:
+        """Right minus left stamp of the nearest recent left/right frames (ns), or None."""
+        left, right = self._recent
+        if not left or not right:
+            return None
+        r = right[-1]
+        return min((r - s for s in left), key=abs)
+
+    def add(self, side: int, frame: Frame[T]) -> PairOutcome[T]:
+        """Add a frame of ``side`` (LEFT or RIGHT)."""
+        out: PairOutcome[T] = PairOutcome()
+        stamp = frame.stamp_ns
+        if self._newest is not None and stamp < self._newest - self.jump_back_ns:
+            stats = self._sync.stats
+            self._sync = ApproximateTimeSync(self._sync.slop_ns, self._sync.queue_size)
+            self._sync.stats = stats  # counters stay lifetime counters
+            self._recent[LEFT].clear()
+            self._recent[RIGHT].clear()
+            self._newest = None
+            out.reset = True
+        self._newest = stamp if self._newest is None else max(self._newest, stamp)
+        self._recent[side].append(stamp)
+        late_before = self._sync.stats.late
+        pair = self._sync.add(side, stamp, frame)
+        out.late = self._sync.stats.late > late_before
+        if pair is not None:
+            out.pair = pair
+        return out
+
+
+class MotionPairing(Generic[T]):
+    """Frame t - ``frame_gap`` paired with frame t, reset on a jump back.
+
+    Args:
+        frame_gap: frames between the two of a pair (1 = consecutive).
+        jump_back_s: a stamp this much older than the last frame's resets the history, s.
+    """
+
+    def __init__(self, frame_gap: int, jump_back_s: float = 1.0) -> None:
+        self._history: deque[Frame[T]] = deque(maxlen=frame_gap + 1)
+        self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
+
+    @property
+    def frame_gap(self) -> int:
+        return int(self._history.maxlen or 1) - 1
+
+    def configure(self, frame_gap: int, jump_back_s: float) -> None:
+        if frame_gap != self.frame_gap:
+            self._history = deque(self._history, maxlen=frame_gap + 1)
+        self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
+
+    def add(self, frame: Frame[T]) -> PairOutcome[T]:
+        """Add the newest frame."""
+        out: PairOutcome[T] = PairOutcome()
+        if self._history:
+            last = self._history[-1].stamp_ns
+            if frame.stamp_ns < last - self.jump_back_ns:
+                self._history.clear()
+                out.reset = True
+            elif frame.stamp_ns <= last:
+                out.late = True
+                return out
+        self._history.append(frame)
+        if len(self._history) == self._history.maxlen:
+            out.pair = (self._history[0], frame)
+        return out

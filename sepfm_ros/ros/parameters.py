@@ -1,0 +1,196 @@
+"""The node's parameters: names, defaults, ranges and descriptions, their validation, and the
+:class:`~sepfm_ros.pipeline.pipeline.PipelineConfig` they make. Shared by the node and by
+``process`` (offline processing takes the same ``-p NAME:=VALUE`` parameters).
+
+``config/sepfm.yaml`` lists the same defaults (a test keeps them equal).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from rcl_interfaces.msg import (
+    FloatingPointRange,
+    IntegerRange,
+    ParameterDescriptor,
+    ParameterType,
+)
+
+from sepfm_ros.geometry import METHODS
+from sepfm_ros.pipeline.features import FEATURES
+from sepfm_ros.pipeline.pipeline import PipelineConfig
+
+NODE_NAME = "sepfm"
+MODES = ("stereo", "motion")
+TRANSPORTS = ("raw", "compressed")
+# Estimator option that the hough_width_px parameter sets (0 = leave the estimator's default).
+HOUGH_WIDTH_OPTION = "hough_width"
+# Estimator option that the max_samples parameter sets.
+MAX_SAMPLES_OPTION = "max_samples"
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """One node parameter: default, description, and either a numeric range or choices."""
+
+    default: Any
+    description: str
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+    read_only: bool = False
+
+
+PARAMS: dict[str, ParamSpec] = {
+    "mode": ParamSpec(
+        "stereo",
+        "stereo: pair left/image_raw with right/image_raw by stamp; motion: frame t-gap with t",
+        choices=MODES,
+        read_only=True,
+    ),
+    "transport": ParamSpec(
+        "raw",
+        "raw: sensor_msgs/Image; compressed: sensor_msgs/CompressedImage on <topic>/compressed",
+        choices=TRANSPORTS,
+        read_only=True,
+    ),
+    "input_reliability": ParamSpec(
+        "auto",
+        "QoS reliability of the image subscriptions: auto = what the publishers offer (reliable"
+        " when all of them publish reliable), reliable, or best_effort",
+        choices=("auto", "reliable", "best_effort"),
+        read_only=True,
+    ),
+    "sync_slop_s": ParamSpec(
+        0.005,
+        "stereo: largest stamp difference of a pair, s (0 = exact; up to half the frame period"
+        " pairs each left frame with its nearest right one)",
+        0.0,
+        1.0,
+    ),
+    "sync_queue_size": ParamSpec(10, "stereo: unpaired messages kept per side", 1, 1000),
+    "stamp_jump_reset_s": ParamSpec(
+        1.0,
+        "a frame stamped this much before the newest one (a looped bag, a restarted driver or"
+        " simulator) restarts the pairing instead of being dropped as late, s",
+        0.001,
+        1e6,
+    ),
+    "frame_gap": ParamSpec(1, "motion: F between frame t - frame_gap and frame t", 1, 100),
+    "features": ParamSpec("orb", "feature detector/descriptor", choices=FEATURES),
+    "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
+    "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
+    "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
+    "method": ParamSpec("sep5", "estimator method", choices=METHODS),
+    "threshold_px": ParamSpec(
+        1.0, "inlier threshold, symmetric epipolar distance, px", 0.01, 100.0
+    ),
+    "confidence": ParamSpec(0.99, "RANSAC confidence", 0.5, 0.999999),
+    "max_samples": ParamSpec(
+        1000,
+        "cap on the estimator's RANSAC samples per pair (bounds its time on a pair without"
+        " consensus; ample for ORB matches of real pairs)",
+        10,
+        1_000_000,
+    ),
+    "hough_width_px": ParamSpec(
+        0, "working width of the line-pair (Hough) search, px (0 = estimator default)", 0, 8192
+    ),
+    "seed": ParamSpec(
+        0, "seed of the estimator's random choices (same for every pair)", 0, 2**31 - 1
+    ),
+    "publish_unreliable": ParamSpec(
+        True,
+        "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
+        " plane); ~/estimate_info then carries the reason at WARN level",
+    ),
+    "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
+    "diagnostics_period_s": ParamSpec(
+        1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
+    ),
+    "input_timeout_s": ParamSpec(
+        0.5,
+        "stereo: a camera silent this much longer than the other one turns /diagnostics to WARN"
+        " (reported at once, and back to OK when it returns)",
+        0.05,
+        60.0,
+    ),
+}
+
+PIPELINE_PARAMS = {
+    "features": "features",
+    "max_features": "max_features",
+    "ratio": "ratio",
+    "max_matches": "max_matches",
+    "method": "method",
+    "threshold_px": "threshold_px",
+    "confidence": "confidence",
+    "seed": "seed",
+}
+
+
+def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
+    extra = f" (one of: {', '.join(spec.choices)})" if spec.choices else ""
+    desc = ParameterDescriptor(
+        name=name, description=spec.description + extra, read_only=spec.read_only
+    )
+    if isinstance(spec.default, bool):
+        desc.type = ParameterType.PARAMETER_BOOL
+    elif isinstance(spec.default, str):
+        desc.type = ParameterType.PARAMETER_STRING
+    elif isinstance(spec.default, int):
+        desc.type = ParameterType.PARAMETER_INTEGER
+        desc.integer_range = [
+            IntegerRange(from_value=int(spec.low), to_value=int(spec.high), step=1)
+        ]
+    else:
+        desc.type = ParameterType.PARAMETER_DOUBLE
+        desc.floating_point_range = [
+            FloatingPointRange(from_value=float(spec.low), to_value=float(spec.high), step=0.0)
+        ]
+    if spec.choices:
+        desc.additional_constraints = "one of: " + ", ".join(spec.choices)
+    return desc
+
+
+def parameter_error(name: str, value: Any) -> str | None:
+    """Why ``value`` is not acceptable for parameter ``name`` (None when it is)."""
+    spec = PARAMS.get(name)
+    if spec is None:
+        return None  # not ours (e.g. use_sim_time, qos overrides)
+    if spec.choices:
+        if value not in spec.choices:
+            return f"{name} must be one of {', '.join(spec.choices)}; got {value!r}"
+        return None
+    if isinstance(spec.default, bool):
+        return None if isinstance(value, bool) else f"{name} must be true or false; got {value!r}"
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return f"{name} must be a number; got {value!r}"
+    if not spec.low <= value <= spec.high:
+        return f"{name} must be in [{spec.low}, {spec.high}]; got {value}"
+    return None
+
+
+def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
+    """Node parameter values -> PipelineConfig (ValueError when invalid)."""
+    options = {MAX_SAMPLES_OPTION: int(values.get("max_samples", PARAMS["max_samples"].default))}
+    if int(values.get("hough_width_px", 0)) > 0:
+        options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
+    kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}
+    return PipelineConfig(**kwargs, estimator_options=options)
+
+
+def parameters_help() -> str:
+    """One line per parameter: name, default, range or choices, description."""
+    lines = []
+    for name, spec in PARAMS.items():
+        if spec.choices:
+            rng = f" one of {'/'.join(spec.choices)}"
+        elif isinstance(spec.default, bool):
+            rng = " true/false"
+        else:
+            rng = f" [{spec.low}, {spec.high}]"
+        ro = " (read-only)" if spec.read_only else ""
+        lines.append(f"  {name} = {spec.default!r}{rng}{ro}: {spec.description}")
+    return "\n".join(lines)

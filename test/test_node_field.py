@@ -1,0 +1,285 @@
+"""The live node as a user's robot meets it, at default settings (no QoS overrides): a camera
+publishing with ROS 2's default QoS, remapped compressed topics, stamps that jump back, a stereo
+rig whose right camera lags, and a flood of malformed images among real frames.
+
+Each test starts its own node subprocess (its subscriptions adapt to the first publishers).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+
+import cv2
+import numpy as np
+import pytest
+from ground_truth import gt_fundamental, median_gt_inlier_error
+
+rclpy = pytest.importorskip("rclpy")
+
+from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
+from ros_helpers import Ros, image_msg, send_pair, start_node  # noqa: E402
+from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
+
+from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
+
+# ROS 2's default publisher QoS (reliable, keep-last 10), as a camera driver's publisher has it
+DEFAULT_QOS = QoSProfile(depth=10)
+TEMPLE = [f"templeRing/templeR{k:04d}.png" for k in range(1, 21)]
+KITTI = [(f"kitti_seq2/left/{k:06d}.png", f"kitti_seq2/right/{k:06d}.png") for k in range(0, 10)]
+T0 = 1_700_000_000 * 10**9  # stamps of these tests (ns)
+
+
+@pytest.fixture(scope="module")
+def ros(ros_domain_id):
+    r = Ros()
+    yield r
+    r.close()
+
+
+@pytest.fixture(scope="module")
+def images(shared_data):
+    cache: dict[tuple[str, int], np.ndarray] = {}
+
+    def load(rel: str, flags: int = cv2.IMREAD_GRAYSCALE) -> np.ndarray:
+        if (rel, flags) not in cache:
+            cache[(rel, flags)] = cv2.imread(str(shared_data / rel), flags)
+            assert cache[(rel, flags)] is not None, rel
+        return cache[(rel, flags)]
+
+    return load
+
+
+def bgr_msg(bgr: np.ndarray, stamp: int) -> Image:
+    """A bgr8 sensor_msgs/Image of the colour image ``bgr`` (H, W, 3)."""
+    msg = image_msg(bgr[..., 0], stamp)
+    msg.encoding = "bgr8"
+    msg.step = 3 * bgr.shape[1]
+    msg.data = np.ascontiguousarray(bgr).tobytes()
+    return msg
+
+
+def gt_error(shared_data, values, F, cloud, img_a, img_b) -> float:
+    pts_a = np.stack([cloud["u_a"], cloud["v_a"]], axis=1).astype(np.float64)
+    pts_b = np.stack([cloud["u_b"], cloud["v_b"]], axis=1).astype(np.float64)
+    err, n_gt = median_gt_inlier_error(F, gt_fundamental(shared_data, img_a, img_b), pts_a, pts_b)
+    assert n_gt >= 20, f"{img_a} -> {img_b}: only {n_gt} GT-inlier matches"
+    return err
+
+
+def wait_health(client, predicate, timeout: float = 15.0) -> dict[str, str]:
+    """The first /diagnostics report of the client's node (from now on) that satisfies
+    ``predicate(values, level, message)``; fails with the last report after ``timeout``."""
+    with client.lock:
+        start = len(client.health)
+    deadline = time.monotonic() + timeout
+    last = None
+    while time.monotonic() < deadline:
+        with client.lock:
+            reports = list(zip(client.health[start:], client.health_log[start:], strict=True))
+        for values, (_, level, message) in reports:
+            last = (values, level, message)
+            if predicate(values, level, message):
+                return values | {"_level": level, "_message": message}
+        time.sleep(0.05)
+    raise AssertionError(f"no matching /diagnostics report within {timeout} s; last: {last}")
+
+
+def paced(period_s: float):
+    """Yields k = 0, 1, ... at ``period_s`` intervals (a camera's pace)."""
+    start = time.monotonic()
+    k = 0
+    while True:
+        delay = start + k * period_s - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        yield k
+        k += 1
+
+
+def test_default_qos_colour_camera_every_pair_answered_then_stamps_jump_back(
+    ros, tmp_path, images, shared_data
+):
+    """640x480 bgr8 at 4 Hz with ROS 2's default QoS, node at default settings."""
+    proc, client = start_node(
+        "field_motion",
+        tmp_path,
+        ros,
+        {"image": ("/robot/camera/image_raw", Image)},
+        "-p",
+        "mode:=motion",
+        "-r",
+        "image_raw:=/robot/camera/image_raw",
+        "-p",
+        "diagnostics_period_s:=0.5",
+        input_qos=DEFAULT_QOS,
+    )
+    try:
+        health = client.latest_health(after=0.0)
+        assert health["input_reliability_image"] == "reliable"
+        stamps = []
+        for k in paced(0.25):
+            if k == len(TEMPLE):
+                break
+            stamp = T0 + k * 250_000_000
+            stamps.append(stamp)
+            client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), stamp))
+        # views listed as a pair in pairs.json (a few consecutive views of the ring are not)
+        listed = {
+            (e["img_a"], e["img_b"]) for e in json.loads((shared_data / "pairs.json").read_text())
+        }
+        answered, errors = 0, []
+        for k in range(1, len(TEMPLE)):
+            try:
+                values, F, cloud = client.wait_outputs(stamps[k], timeout=10.0)
+            except AssertionError:
+                continue
+            answered += 1
+            # the pair is the one its stamps say: frame k-1 with frame k
+            assert values["stamp_a"] == f"{stamps[k - 1] // 10**9}.{stamps[k - 1] % 10**9:09d}"
+            if (TEMPLE[k - 1], TEMPLE[k]) in listed:
+                errors.append(gt_error(shared_data, values, F, cloud, TEMPLE[k - 1], TEMPLE[k]))
+        assert answered >= 18, f"answered {answered} of 19 pairs"
+        assert len(errors) >= 15 and max(errors) < 1.0, errors
+        # the stamps jump back (a looped bag): answers go on from the second frame after it
+        back = [T0 - 100 * 10**9 + k * 250_000_000 for k in range(4)]
+        for k, stamp in zip(paced(0.25), back, strict=False):
+            client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), stamp))
+        for stamp in back[1:]:
+            values, F, _ = client.wait_outputs(stamp, timeout=10.0)
+            assert F is not None, values
+        report = wait_health(client, lambda v, lv, m: int(v["stamp_jumps"]) == 1)
+        assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
+        assert "jumped back" in report["_message"]
+        assert "stamps jumped back" in proc.output()
+    finally:
+        proc.stop()
+
+
+def test_sensor_data_qos_camera_is_received_best_effort(ros, tmp_path, images, shared_data):
+    proc, client = start_node(
+        "field_best_effort",
+        tmp_path,
+        ros,
+        {"image": ("/be/image_raw", Image)},
+        "-p",
+        "mode:=motion",
+        "-r",
+        "image_raw:=/be/image_raw",
+        input_qos=qos_profile_sensor_data,
+    )
+    try:
+        health = client.latest_health(after=0.0)
+        assert health["input_reliability_image"] == "best_effort"
+        stamps = []
+        for k in paced(0.25):
+            if k == 6:
+                break
+            stamps.append(T0 + k * 250_000_000)
+            client.publish("image", image_msg(images(TEMPLE[12 + k]), stamps[-1]))
+        answered = 0
+        for k in range(1, 6):
+            try:
+                values, F, cloud = client.wait_outputs(stamps[k], timeout=5.0)
+            except AssertionError:
+                continue
+            answered += 1
+            img_a, img_b = TEMPLE[11 + k], TEMPLE[12 + k]  # views 13-18: consecutive pairs
+            assert gt_error(shared_data, values, F, cloud, img_a, img_b) < 1.0
+        assert answered >= 3, f"answered {answered} of 5 mono8 pairs over loopback"
+    finally:
+        proc.stop()
+
+
+def test_compressed_transport_follows_remaps(ros, tmp_path, images, shared_data):
+    """image_transport's rule: remap the base topic, then add /compressed."""
+    proc, client = start_node(
+        "field_compressed",
+        tmp_path,
+        ros,
+        {
+            "left": ("/robot/cam/left/image_raw/compressed", CompressedImage),
+            "right": ("/robot/cam/right/image_raw/compressed", CompressedImage),
+        },
+        "-r",
+        "left/image_raw:=/robot/cam/left/image_raw",
+        "-r",
+        "right/image_raw:=/robot/cam/right/image_raw",
+        "-p",
+        "transport:=compressed",
+        input_qos=DEFAULT_QOS,
+    )
+    try:
+        img_a, img_b = KITTI[0]
+        stamp = T0
+        left = numpy_to_compressed(images(img_a), "png")
+        right = numpy_to_compressed(images(img_b), "png")
+        for msg in (left, right):
+            msg.header.stamp.sec, msg.header.stamp.nanosec = stamp // 10**9, stamp % 10**9
+        send_pair(client, left, right)
+        values, F, cloud = client.wait_outputs(stamp)
+        assert gt_error(shared_data, values, F, cloud, img_a, img_b) < 1.0
+        assert "/robot/cam/left/image_raw/compressed" in proc.output()
+    finally:
+        proc.stop()
+
+
+def test_lagging_right_camera_warns_with_offset_then_pairs_nearest(
+    ros, tmp_path, images, shared_data
+):
+    """Right stamps 12 ms after left at 10 Hz: the default 5 ms slop pairs nothing, which
+    /diagnostics says with the measured offset; a slop of half the frame period pairs each left
+    frame with its own right frame."""
+    proc, client = start_node(
+        "field_lag",
+        tmp_path,
+        ros,
+        {"left": ("/lag/left/image_raw", Image), "right": ("/lag/right/image_raw", Image)},
+        "-r",
+        "left/image_raw:=/lag/left/image_raw",
+        "-r",
+        "right/image_raw:=/lag/right/image_raw",
+        "-p",
+        "diagnostics_period_s:=0.25",
+        input_qos=DEFAULT_QOS,
+    )
+    lag = 12_000_000
+    period = 100_000_000
+    try:
+        frames = {k: (images(a), images(b)) for k, (a, b) in enumerate(KITTI)}
+        pace = paced(0.2)  # stamps 100 ms apart, sent at 5 Hz (a loaded 2-core machine)
+        for k in range(15):
+            next(pace)
+            left, right = frames[k % len(KITTI)]
+            stamp = T0 + k * period
+            send_pair(client, image_msg(left, stamp), image_msg(right, stamp + lag))
+        report = wait_health(client, lambda v, lv, m: "no pair formed" in m, timeout=5.0)
+        assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
+        assert "+12.0 ms" in report["_message"] and "sync_slop_s" in report["_message"]
+        with client.lock:
+            assert not client.info
+        ok, reason = client.set_parameter("sync_slop_s", 0.05)
+        assert ok, reason
+        stamps = []
+        for k in range(15, 15 + len(KITTI)):
+            next(pace)
+            left, right = frames[k % len(KITTI)]
+            stamp = T0 + k * period
+            stamps.append((k, stamp))
+            send_pair(client, image_msg(left, stamp), image_msg(right, stamp + lag))
+        answered = 0
+        for k, stamp in stamps:
+            try:
+                values, F, cloud = client.wait_outputs(stamp, timeout=10.0 if k == 15 else 3.0)
+            except AssertionError:
+                continue  # a pair the node dropped because a newer one came (loaded machine)
+            answered += 1
+            # paired with its own right frame (12 ms), not the previous one (88 ms)
+            assert values["stamp_b"] == f"{(stamp + lag) // 10**9}.{(stamp + lag) % 10**9:09d}"
+            img_a, img_b = KITTI[k % len(KITTI)]
+            assert gt_error(shared_data, values, F, cloud, img_a, img_b) < 1.0
+        assert answered >= 7, f"answered {answered} of {len(stamps)} pairs"
+        wait_health(client, lambda v, lv, m: lv == 0, timeout=15.0)
+    finally:
+        proc.stop()

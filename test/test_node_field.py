@@ -283,3 +283,80 @@ def test_lagging_right_camera_warns_with_offset_then_pairs_nearest(
         wait_health(client, lambda v, lv, m: lv == 0, timeout=15.0)
     finally:
         proc.stop()
+
+
+def malformed_messages(rng: np.random.Generator, count: int) -> list[Image]:
+    """Images wrong in a way the node's callback rejects: a step shorter than a row, data
+    shorter or longer than step x height, an unknown encoding, zero size (up to VGA colour)."""
+    out = []
+    for k in range(count):
+        w, h = int(rng.integers(1, 641)), int(rng.integers(1, 481))
+        step, n = 3 * w, 3 * w * h
+        encoding = "bgr8"
+        kind = k % 4
+        if kind == 0:
+            step = int(rng.integers(0, 3 * w))
+        elif kind == 1:
+            n = int(rng.integers(0, n)) if rng.random() < 0.5 else n + int(rng.integers(1, 8192))
+        elif kind == 2:
+            encoding = "not_an_encoding"
+        else:
+            w, n = 0, int(rng.integers(0, 256))
+        msg = image_msg(np.zeros((1, 1), np.uint8), 0)
+        msg.width, msg.height, msg.step, msg.encoding = w, h, step, encoding
+        msg.data = rng.bytes(n)
+        out.append(msg)
+    return out
+
+
+def test_real_frames_answered_under_a_flood_of_malformed_images(ros, tmp_path, images):
+    """5,000 malformed images among 41 real frames at 3 Hz, reliable QoS, default settings."""
+    rng = np.random.default_rng(11)
+    bad = malformed_messages(rng, 64)
+    proc, client = start_node(
+        "field_flood",
+        tmp_path,
+        ros,
+        {"image": ("/flood/image_raw", Image)},
+        "-p",
+        "mode:=motion",
+        "-r",
+        "image_raw:=/flood/image_raw",
+        input_qos=DEFAULT_QOS,
+    )
+    frames, per_frame = 41, 5000 // 40
+    try:
+        stamps, sent_bad = [], 0
+        for k in paced(1 / 3):
+            if k == frames:
+                break
+            stamp = T0 + k * 333_000_000
+            stamps.append(stamp)
+            client.publish("image", image_msg(images(TEMPLE[12 + k % 8]), stamp))
+            if k == frames - 1:
+                break
+            start = time.monotonic()
+            for j in range(per_frame):  # spread over most of the frame period
+                delay = start + j * 0.3 / per_frame - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                msg = bad[(k * per_frame + j) % len(bad)]
+                msg.header.stamp.sec = (stamp + j + 1) // 10**9
+                msg.header.stamp.nanosec = (stamp + j + 1) % 10**9
+                client.publish("image", msg)
+                sent_bad += 1
+        deadline = time.monotonic() + 15.0
+        while time.monotonic() < deadline:
+            with client.lock:
+                answered = sum(s in client.info for s in stamps[1:])
+            if answered == len(stamps) - 1:
+                break
+            time.sleep(0.1)
+        health = client.latest_health(after=0.0)
+        print(f"flood: {answered}/{len(stamps) - 1} real pairs answered, {sent_bad} malformed")
+        print({k: v for k, v in health.items() if k.startswith(("errors", "lost", "dropped"))})
+        assert sent_bad >= 4800
+        assert answered >= 0.9 * (len(stamps) - 1), f"answered {answered} of {len(stamps) - 1}"
+        assert int(health["errors_total"]) >= 0.9 * sent_bad  # counted, not silently lost
+    finally:
+        proc.stop()

@@ -258,8 +258,11 @@ class SepfmNode(Node):
             return
         more = f" [{held} more since the last report]" if held else ""
         note = f" [logged at most every {LOG_THROTTLE_S:.0f} s, counted in /diagnostics]"
-        log = self.get_logger().error if error else self.get_logger().warning
-        log(text + more + note)
+        # one call site per severity: rclpy refuses another severity at the same call site
+        if error:
+            self.get_logger().error(text + more + note)
+        else:
+            self.get_logger().warning(text + more + note)
 
     def _bad_input(self, kind: str, text: str) -> None:
         """Count a bad message by kind and log it (throttled per kind)."""

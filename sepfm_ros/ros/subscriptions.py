@@ -33,7 +33,7 @@ from rclpy.qos import (
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
 RELIABILITIES = ("auto", "reliable", "best_effort")
-INPUT_DEPTH = 5  # keep-last depth of an image subscription
+INPUT_DEPTH = 10  # keep-last depth of an image subscription
 DISCOVERY_POLL_S = 0.1  # auto: how often to look for the first publishers
 
 

@@ -24,11 +24,13 @@ results equal offline processing. docs/design.md gives the reasons and measureme
 from __future__ import annotations
 
 import argparse
+import functools
 import os
 import signal
 import threading
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -127,6 +129,23 @@ def limit_thread_pools(threads: int = 1) -> None:
     """
     cv2.setNumThreads(int(threads))
     threadpool_limits(limits=int(threads), user_api="blas")
+
+
+def guarded(callback: Callable[..., None]) -> Callable[..., None]:
+    """An executor callback that never raises: an exception is counted as an internal error
+    (ERROR level in /diagnostics) and logged, and the executor keeps serving."""
+
+    @functools.wraps(callback)
+    def run(self: SepfmNode, *args: Any) -> None:
+        try:
+            callback(self, *args)
+        except Exception as err:  # noqa: BLE001 - a long-running node keeps serving
+            kind = f"internal_{type(err).__name__}"
+            self._health.problem(kind)
+            text = f"{callback.__name__}: " + "".join(traceback.format_exception(err))
+            self._log_throttled(kind, text)
+
+    return run
 
 
 class SepfmNode(Node):
@@ -269,6 +288,7 @@ class SepfmNode(Node):
         self._health.problem(kind)
         self._log_throttled(kind, f"skipping bad input ({kind}): {text}")
 
+    @guarded
     def _on_lost(self, topic: str, count: int) -> None:
         if count <= 0:
             return
@@ -281,6 +301,7 @@ class SepfmNode(Node):
             error=False,
         )
 
+    @guarded
     def _on_incompatible(self, topic: str, policy: str) -> None:
         self._health.problem("incompatible_qos")
         self._log_throttled(
@@ -289,6 +310,7 @@ class SepfmNode(Node):
             "restart the node with input_reliability:=best_effort to receive every publisher",
         )
 
+    @guarded
     def _on_subscribed(self, topic: str, reliability: str) -> None:
         self.get_logger().info(f"subscribed to {topic} ({reliability})")
 
@@ -319,6 +341,7 @@ class SepfmNode(Node):
             error=False,
         )
 
+    @guarded
     def _on_stereo(self, msg: Any, side: int) -> None:
         topic = "left" if side == LEFT else "right"
         received = self._health.input(topic)
@@ -346,6 +369,7 @@ class SepfmNode(Node):
         job = Job(left, right, max(t_left, t_right), header, ("l", ns_l), ("r", ns_r))
         self._offer(job)
 
+    @guarded
     def _on_motion(self, msg: Any) -> None:
         received = self._health.input("image")
         if not self._precheck(msg, "image"):
@@ -503,12 +527,14 @@ class SepfmNode(Node):
                 values["sync_late"] = stats.late
         return values
 
+    @guarded
     def _check_level_change(self) -> None:
         """Report at once when one camera stalls or comes back (between periodic reports)."""
         stall = self._health.stall()
         if (stall is None) != (self._reported_stall is None):
             self._report_health()
 
+    @guarded
     def _report_health(self) -> None:
         release_free_memory()
         values = self.health()

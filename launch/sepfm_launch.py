@@ -1,10 +1,14 @@
 """Launch the sepfm node with the installed config/sepfm.yaml.
 
     ros2 launch sepfm_ros sepfm_launch.py mode:=motion image:=/camera/image_raw
-    ros2 launch sepfm_ros sepfm_launch.py left:=/stereo/left right:=/stereo/right
+    ros2 launch sepfm_ros sepfm_launch.py left:=/stereo/left/image_raw \
+        right:=/stereo/right/image_raw
+    ros2 launch sepfm_ros sepfm_launch.py namespace:=robot1 transport:=compressed use_sim_time:=true
 
-Arguments: mode (stereo|motion), transport (raw|compressed), params_file, and the input topics
-left, right (stereo) and image (motion).
+Arguments: mode (stereo|motion), transport (raw|compressed), params_file, namespace,
+use_sim_time, and the input topics left, right (stereo) and image (motion). The topics are base
+image topics: with transport:=compressed the node adds /compressed after the remap, as
+image_transport does.
 """
 
 import os
@@ -13,6 +17,7 @@ from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
 
 from launch import LaunchDescription
 
@@ -21,8 +26,10 @@ def generate_launch_description() -> LaunchDescription:
     default_params = os.path.join(get_package_share_directory("sepfm_ros"), "config", "sepfm.yaml")
     args = {
         "mode": ("stereo", "stereo or motion"),
-        "transport": ("raw", "raw or compressed"),
+        "transport": ("raw", "raw or compressed (the node subscribes to <topic>/compressed)"),
         "params_file": (default_params, "node parameters (YAML)"),
+        "namespace": ("", "namespace of the node (its relative input topics follow it)"),
+        "use_sim_time": ("false", "true: stamps and /diagnostics on /clock time (bag replay)"),
         "left": ("left/image_raw", "stereo: left image topic"),
         "right": ("right/image_raw", "stereo: right image topic"),
         "image": ("image_raw", "motion: image topic"),
@@ -31,10 +38,17 @@ def generate_launch_description() -> LaunchDescription:
         package="sepfm_ros",
         executable="node",
         name="sepfm",
+        namespace=LaunchConfiguration("namespace"),
         output="screen",
         parameters=[
             LaunchConfiguration("params_file"),
-            {"mode": LaunchConfiguration("mode"), "transport": LaunchConfiguration("transport")},
+            {
+                "mode": LaunchConfiguration("mode"),
+                "transport": LaunchConfiguration("transport"),
+                "use_sim_time": ParameterValue(
+                    LaunchConfiguration("use_sim_time"), value_type=bool
+                ),
+            },
         ],
         remappings=[
             ("left/image_raw", LaunchConfiguration("left")),

@@ -1,0 +1,44 @@
+"""launch/sepfm_launch.py: its arguments and remaps (read without ROS), and the launch
+description it generates where the ROS launch packages are installed."""
+
+from __future__ import annotations
+
+import ast
+import importlib.util
+
+import pytest
+from conftest import REPO_ROOT
+
+LAUNCH = REPO_ROOT / "launch" / "sepfm_launch.py"
+ARGUMENTS = {"mode", "transport", "params_file", "namespace", "use_sim_time", "left", "right"}
+
+
+def _literal_dict_keys(tree: ast.AST) -> set[str]:
+    keys: set[str] = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "args":
+            keys |= {k.value for k in node.value.keys}
+    return keys
+
+
+def test_launch_file_declares_namespace_sim_time_and_remaps_base_topics():
+    tree = ast.parse(LAUNCH.read_text())
+    assert ARGUMENTS | {"image"} <= _literal_dict_keys(tree)
+    remapped = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == "remappings":
+            remapped = {elt.elts[0].value for elt in node.value.elts}
+    # base image topics only: the node adds /compressed after resolving them
+    assert remapped == {"left/image_raw", "right/image_raw", "image_raw"}
+    assert "compressed" not in {r.split("/")[-1] for r in remapped}
+
+
+def test_launch_description_generates():
+    if importlib.util.find_spec("launch_ros") is None:
+        pytest.skip("launch_ros is not installed here (it is not on PyPI; a ROS install has it)")
+    spec = importlib.util.spec_from_file_location("sepfm_launch", LAUNCH)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+    names = {getattr(e, "name", None) for e in description.entities}
+    assert ARGUMENTS <= names

@@ -2,6 +2,10 @@
 
     python benchmarks/bench_node.py [--seconds 10] [--rate 30] [--features orb]
         [--max-features 1000] [--method sep5] [--scenes NAME ...]
+        [--publisher-qos default sensor_data]
+
+The node runs at its default settings (no QoS override), fed by a publisher with the QoS a camera
+driver uses: ROS 2's default (reliable) or sensor-data (best effort), one node per QoS.
 
 For each scene it prints (templeRing 640x480 in motion mode: the 47 views of the ring as one
 image stream, F between consecutive views, each frame detected once; KITTI stereo 1241x376:
@@ -66,7 +70,26 @@ SCENES = {
         ],
     ),
 }
-DEFAULT_SCENES = ("templeRing 640x480 motion", "KITTI stereo 1241x376")
+# colour camera streams as a user's driver publishes them (bgr8; the 1920x1080 one upscaled)
+SCENES["templeRing 640x480 bgr8 motion"] = (
+    "motion",
+    [f"templeRing/templeR{k:04d}.png" for k in range(1, 48)],
+)
+SCENES["templeRing 1920x1080 bgr8 motion"] = SCENES["templeRing 640x480 bgr8 motion"]
+COLOUR_SIZES = {
+    "templeRing 640x480 bgr8 motion": None,
+    "templeRing 1920x1080 bgr8 motion": (1920, 1080),
+}
+DEFAULT_SCENES = (
+    "templeRing 640x480 motion",
+    "KITTI stereo 1241x376",
+    "templeRing 640x480 bgr8 motion",
+    "templeRing 1920x1080 bgr8 motion",
+)
+# publisher QoS of the feeding "camera driver": ROS 2's default (reliable, keep-last 10) or the
+# sensor-data profile (best effort, keep-last 5); the node runs at its default settings and
+# adapts its subscription to what is offered
+PUBLISHER_QOS = ("default", "sensor_data")
 STAGES = ("decode", "features", "match", "lines", "stage1", "stage2", "refine", "estimate")
 STAGES += ("queue", "publish", "total")
 
@@ -190,11 +213,11 @@ def bench_pipeline_threaded(pipeline, steps, args) -> None:
 class Feeder:
     """Test-side rclpy node: publishes pairs (stereo) or frames (motion), collects answers."""
 
-    def __init__(self, node_name: str, mode: str) -> None:
+    def __init__(self, node_name: str, mode: str, publisher_qos: str) -> None:
         import rclpy
         from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
-        from rclpy.qos import QoSProfile, ReliabilityPolicy
+        from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from sensor_msgs.msg import Image
 
         self.rclpy = rclpy
@@ -202,9 +225,10 @@ class Feeder:
         rclpy.init(context=self.context)
         self.node = rclpy.create_node("sepfm_bench", context=self.context)
         qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        camera_qos = qos if publisher_qos == "default" else qos_profile_sensor_data
         topics = ("left", "right") if mode == "stereo" else ("",)
         self.pubs = [
-            self.node.create_publisher(Image, f"/bench/{t}{'/' if t else ''}image_raw", qos)
+            self.node.create_publisher(Image, f"/bench/{t}{'/' if t else ''}image_raw", camera_qos)
             for t in topics
         ]
         self.lock = threading.Lock()
@@ -287,28 +311,31 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s, threads=None):
         print(f"      node CPU ms/pair by thread: {thread_line(*threads, len(got))}")
 
 
-def bench_node(mode, images, args) -> None:
+def bench_node(mode, images, args, publisher_qos: str) -> None:
     from sepfm_ros.ros.image_conversion import numpy_to_image
 
     node_name = "sepfm_bench_node"
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={node_name}"]
     cmd += ["-p", f"mode:={mode}"]
     topics = ("left/image_raw", "right/image_raw") if mode == "stereo" else ("image_raw",)
-    for topic in topics:
+    for topic in topics:  # no QoS override: the node's default subscription
         cmd += ["-r", f"{topic}:=/bench/{topic}"]
-        cmd += ["-p", f"qos_overrides./bench/{topic}.subscription.reliability:=reliable"]
     cmd += ["-p", f"features:={args.features}", "-p", f"max_features:={args.max_features}"]
     cmd += ["-p", f"method:={args.method}"]
     for item in args.param:
         cmd += ["-p", item]
     proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
-    feeder = Feeder(node_name, mode)
+    feeder = Feeder(node_name, mode, publisher_qos)
     try:
         feeder.wait_connected()
+
+        def msg(image):
+            return numpy_to_image(image, "bgr8" if image.ndim == 3 else "mono8")
+
         if mode == "stereo":
-            msgs = [(numpy_to_image(a, "mono8"), numpy_to_image(b, "mono8")) for a, b in images]
+            msgs = [(msg(a), msg(b)) for a, b in images]
         else:
-            msgs = [(numpy_to_image(a, "mono8"),) for a in images]
+            msgs = [(msg(a),) for a in images]
         # warm-up until 3 answers (motion mode: the first frame has no pair, so no answer); one
         # frame counter throughout, so that a motion stream always pairs neighbouring views
         frame, answered, deadline = 0, 0, time.monotonic() + 300.0
@@ -334,7 +361,9 @@ def bench_node(mode, images, args) -> None:
             sent.append(stamp)
             k += 1
         cpu_s, threads = cpu_seconds(proc.pid) - cpu0, (threads0, thread_cpu(proc.pid))
-        summarize(f"node @{args.rate:g} Hz", feeder, sent, args.seconds, cpu_s, threads)
+        summarize(
+            f"node @{args.rate:g} Hz {publisher_qos}", feeder, sent, args.seconds, cpu_s, threads
+        )
         # closed loop
         cpu0, threads0 = cpu_seconds(proc.pid), thread_cpu(proc.pid)
         sent = []
@@ -347,7 +376,7 @@ def bench_node(mode, images, args) -> None:
             feeder.wait_answer(stamp, 5.0)
         elapsed = time.monotonic() - start
         cpu_s, threads = cpu_seconds(proc.pid) - cpu0, (threads0, thread_cpu(proc.pid))
-        summarize("node closed loop", feeder, sent, elapsed, cpu_s, threads)
+        summarize(f"node closed loop {publisher_qos}", feeder, sent, elapsed, cpu_s, threads)
     finally:
         feeder.close()
         proc.send_signal(signal.SIGINT)
@@ -356,6 +385,11 @@ def bench_node(mode, images, args) -> None:
         except subprocess.TimeoutExpired:  # never leave a node running (it would load the cores)
             proc.kill()
             proc.wait()
+
+
+def _grey(image: np.ndarray) -> np.ndarray:
+    """The node decodes to mono8; the pipeline runs on that."""
+    return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
 def main() -> int:
@@ -373,6 +407,13 @@ def main() -> int:
         help="another node parameter (numeric or string), also used by the pipeline runs",
     )
     parser.add_argument("--scenes", nargs="*", default=list(DEFAULT_SCENES), choices=SCENES)
+    parser.add_argument(
+        "--publisher-qos",
+        nargs="*",
+        default=list(PUBLISHER_QOS),
+        choices=PUBLISHER_QOS,
+        help="QoS of the feeding publisher (the node keeps its default settings)",
+    )
     args = parser.parse_args()
     if not DATA.is_dir():
         print(f"shared data not found at {DATA}", file=sys.stderr)
@@ -385,18 +426,25 @@ def main() -> int:
         " stage times are means"
     )
 
-    def read(name):
-        return cv2.imread(str(DATA / name), cv2.IMREAD_GRAYSCALE)
-
     for name in args.scenes:
         mode, names = SCENES[name]
+        colour = name in COLOUR_SIZES
+
+        size = COLOUR_SIZES.get(name)
+
+        def read(rel, colour=colour, size=size):
+            flag = cv2.IMREAD_COLOR if colour else cv2.IMREAD_GRAYSCALE
+            image = cv2.imread(str(DATA / rel), flag)
+            return image if size is None else cv2.resize(image, size)
+
         if mode == "stereo":
             images = [(read(a), read(b)) for a, b in names]
         else:
             images = [read(a) for a in names]
         print(f"{name}:")
-        bench_pipeline(mode, images, args)
-        bench_node(mode, images, args)
+        bench_pipeline(mode, [_grey(i) for i in images] if colour else images, args)
+        for publisher_qos in args.publisher_qos:
+            bench_node(mode, images, args, publisher_qos)
         print(f"  (load average now {os.getloadavg()[0]:.1f})")
     return 0
 

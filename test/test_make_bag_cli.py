@@ -9,7 +9,7 @@ import pytest
 
 from sepfm_ros.geometry import fundamental_from_cameras
 from sepfm_ros.ros import make_bag
-from sepfm_ros.ros.bag_io import BagReader
+from sepfm_ros.ros.bags.reader import BagReader
 
 
 @pytest.mark.parametrize(

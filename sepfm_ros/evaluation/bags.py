@@ -23,7 +23,9 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
-from sepfm_ros.ros.bag_io import GROUND_TRUTH_TOPIC, BagError, BagReader, format_stamp
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
 from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params

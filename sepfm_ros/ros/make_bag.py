@@ -31,14 +31,9 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry import fundamental_from_cameras
-from sepfm_ros.ros.bag_io import (
-    COMPRESSED_IMAGE,
-    GROUND_TRUTH_TOPIC,
-    IMAGE,
-    BagError,
-    BagWriter,
-    check_output_path,
-)
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.types import COMPRESSED_IMAGE, GROUND_TRUTH_TOPIC, IMAGE
+from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.image_conversion import numpy_to_compressed, numpy_to_image
 from sepfm_ros.ros.messages import fundamental_to_image
 

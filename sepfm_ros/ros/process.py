@@ -12,7 +12,7 @@ A progress bar runs on stderr (``--print-done`` also prints a line ``done K/N ST
 each pair once its results are safely in OUT, for programs that watch the progress); at the end a
 summary (per-frame table with ``--table``) is printed,
 scored against the ground truth when the bag has it. Every result is flushed to OUT as soon as it
-is computed (see :class:`~sepfm_ros.ros.bag_io.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
+is computed (see :class:`~sepfm_ros.ros.bags.writer.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
 
 Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
@@ -37,20 +37,17 @@ from sensor_msgs.msg import CompressedImage, Image
 from tqdm import tqdm
 
 from sepfm_ros.pipeline.pipeline import Pipeline
-from sepfm_ros.ros.bag_io import (
+from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError
+from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.types import (
     COMPRESSED_IMAGE,
     DIAGNOSTIC_ARRAY,
     GROUND_TRUTH_TOPIC,
     IMAGE,
     POINTCLOUD2,
-    BagError,
-    BagReader,
-    BagWriter,
-    StampChecker,
-    TopicNotFoundError,
-    check_output_path,
     header_stamp_ns,
 )
+from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
 from sepfm_ros.ros.messages import (
     copy_header,

@@ -33,15 +33,9 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 from tqdm import tqdm
 
-from sepfm_ros.ros.bag_io import (
-    BagError,
-    BagReader,
-    StampChecker,
-    TopicNotFoundError,
-    UnknownTypeError,
-    has_header,
-    header_stamp_ns,
-)
+from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeError
+from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
 
 GAP_FACTOR = 3.0
 

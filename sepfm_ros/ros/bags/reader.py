@@ -9,13 +9,21 @@ republished or copied unchanged.
 from __future__ import annotations
 
 import os
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 from typing import Any
 
-from rosbags.interfaces import Qos
-from rosbags.rosbag2 import Reader
+from rosbags.convert.converter import (
+    LATCH,
+    STATIC_MSGTYPE_RENAMES,
+    is_same_wireformat,
+    migrate_bytes,
+)
+from rosbags.highlevel import AnyReader
+from rosbags.interfaces import Connection, Qos
+from rosbags.typesys import Stores, get_typestore
 
 from sepfm_ros.ros.bags.errors import (
     BagCorruptError,
@@ -47,11 +55,20 @@ class RawMessage:
     data: bytes
 
 
+BAG_SUFFIXES = (".mcap", ".db3", ".bag")
+
+
 class BagReader:
-    """A read-only bag with typed errors. Use as a context manager.
+    """A read-only bag with typed errors, on rosbags' ``AnyReader``. Use as a context manager.
+
+    Reads rosbag2 bags (sqlite3 or mcap: a directory with ``metadata.yaml``, or one bare
+    ``.mcap``/``.db3`` file) and ROS 1 bags (one ``.bag`` file). ROS 1 messages are converted to
+    ROS 2 CDR as they are read (types from the bag's own definitions, ``Header.seq`` dropped,
+    ``tf/tfMessage`` renamed to ``tf2_msgs/msg/TFMessage``, the way ``rosbags-convert`` does), so
+    every :class:`RawMessage` holds CDR bytes whatever the format.
 
     Args:
-        path: a rosbag2 directory (``metadata.yaml`` + storage files) or one ``.mcap``/``.db3``.
+        path: the bag (see above).
     """
 
     def __init__(self, path: str | os.PathLike) -> None:
@@ -60,26 +77,81 @@ class BagReader:
             raise BagNotFoundError(f"bag not found: {self.path}")
         if self.path.is_dir() and not (self.path / "metadata.yaml").is_file():
             raise BagNotFoundError(f"{self.path} is not a rosbag2 bag (no metadata.yaml in it)")
+        if self.path.is_file() and self.path.suffix not in BAG_SUFFIXES:
+            raise BagNotFoundError(
+                f"{self.path} is not a bag: expected a rosbag2 folder or a "
+                f"{', '.join(BAG_SUFFIXES)} file"
+            )
         try:
-            self._reader = Reader(self.path)
+            self._reader = AnyReader([self.path], default_typestore=TYPESTORE)
             self._reader.open()
         except Exception as err:  # noqa: BLE001 - rosbags raises many kinds on bad storage
             raise BagCorruptError(f"cannot read bag {self.path}: {err}") from None
+        self.is_ros1 = not self._reader.is2
+        self.typestore = TYPESTORE
+        self._to_cdr: dict[str, Callable[[bytes], bytes]] = {}
+        self._msgtype: dict[int, str] = {}  # connection id -> ROS 2 type name
+        if self.is_ros1:
+            try:
+                self._prepare_ros1()
+            except Exception as err:  # noqa: BLE001 - bad definitions in the bag
+                self._reader.close()
+                raise BagCorruptError(
+                    f"cannot read the message definitions of {self.path}: {err}"
+                ) from None
         self.topics: dict[str, TopicInfo] = {}
         for conn in self._reader.connections:
-            qos = (
-                tuple(conn.ext.offered_qos_profiles)
-                if hasattr(conn.ext, "offered_qos_profiles")
-                else ()
-            )
+            msgtype = self._ros2_type(conn)
+            qos: tuple[Qos, ...] = ()
+            if hasattr(conn.ext, "offered_qos_profiles"):
+                qos = tuple(conn.ext.offered_qos_profiles)
+            elif getattr(conn.ext, "latching", 0):
+                qos = tuple(LATCH)
             old = self.topics.get(conn.topic)
             count = conn.msgcount + (old.count if old else 0)
-            if old is not None and old.msgtype != conn.msgtype:
+            if old is not None and old.msgtype != msgtype:
+                self._reader.close()
                 raise BagCorruptError(
-                    f"topic {conn.topic} has two types in {self.path}: "
-                    f"{old.msgtype}, {conn.msgtype}"
+                    f"topic {conn.topic} has two types in {self.path}: {old.msgtype}, {msgtype}"
                 )
-            self.topics[conn.topic] = TopicInfo(conn.topic, conn.msgtype, count, qos)
+            self.topics[conn.topic] = TopicInfo(conn.topic, msgtype, count, qos)
+
+    def _ros2_type(self, conn: Connection) -> str:
+        return self._msgtype.get(conn.id, conn.msgtype)
+
+    def _prepare_ros1(self) -> None:
+        """Converters ROS 1 bytes -> ROS 2 CDR per message type, as ``rosbags-convert`` builds them.
+
+        Types known to ROS 2 Jazzy keep Jazzy's definition (what rclpy deserialises); others
+        take the bag's own definition. Where the two differ in wire format, fields are migrated
+        by name.
+        """
+        src = self._reader.typestore
+        dst = get_typestore(Stores.EMPTY)
+        dst.register(TYPESTORE.fielddefs)
+        extra = {k: v for k, v in src.fielddefs.items() if k not in TYPESTORE.fielddefs}
+        extra.pop("std_msgs/msg/Header", None)
+        dst.register(extra)
+        cache: dict[str, object] = {}
+        for conn in self._reader.connections:
+            msgtype = STATIC_MSGTYPE_RENAMES.get(conn.msgtype, conn.msgtype)
+            self._msgtype[conn.id] = msgtype
+            if conn.msgtype in self._to_cdr:
+                continue
+            if is_same_wireformat(src, dst, conn.msgtype, msgtype):
+                self._to_cdr[conn.msgtype] = partial(dst.ros1_to_cdr, typename=msgtype)
+            else:
+                self._to_cdr[conn.msgtype] = partial(
+                    migrate_bytes,
+                    src,
+                    dst,
+                    conn.msgtype,
+                    msgtype,
+                    cache,
+                    src_is2=False,
+                    dst_is2=True,
+                )
+        self.typestore = dst
 
     def __enter__(self) -> BagReader:
         return self
@@ -137,7 +209,9 @@ class BagReader:
             return
         try:
             for conn, log_time, data in self._reader.messages(conns, start=start_ns):
-                yield RawMessage(conn.topic, conn.msgtype, int(log_time), bytes(data))
+                if self.is_ros1:
+                    data = self._to_cdr[conn.msgtype](data)
+                yield RawMessage(conn.topic, self._ros2_type(conn), int(log_time), bytes(data))
         except Exception as err:  # noqa: BLE001 - corrupt storage raises many kinds (zstd, lz4, ...)
             raise BagCorruptError(
                 f"bag {self.path} is corrupt: {type(err).__name__}: {err}"
@@ -146,7 +220,7 @@ class BagReader:
     def deserialize(self, msg: RawMessage) -> Any:
         """A rosbags message object (field access like rclpy messages)."""
         try:
-            return TYPESTORE.deserialize_cdr(msg.data, msg.msgtype)
+            return self.typestore.deserialize_cdr(msg.data, msg.msgtype)
         except KeyError:
             raise UnknownTypeError(f"unknown message type {msg.msgtype}") from None
         except Exception as err:  # rosbags raises several kinds on bad CDR

@@ -189,16 +189,6 @@ class BagReader:
             )
         return info
 
-    def check_known_types(self, topics: Iterable[str]) -> None:
-        """UnknownTypeError unless every topic's type is a ROS 2 Jazzy message type."""
-        for topic in topics:
-            msgtype = self.require(topic).msgtype
-            if msgtype not in TYPESTORE.fielddefs:
-                raise UnknownTypeError(
-                    f"topic {topic} in bag {self.path} has message type {msgtype}, "
-                    "which is not a ROS 2 Jazzy message type known here"
-                )
-
     def messages(
         self, topics: Iterable[str] | None = None, start_ns: int | None = None
     ) -> Iterator[RawMessage]:

@@ -7,9 +7,10 @@ Each bag is a synthetic "street" scene (textured planes with straight edges, kno
 ground-truth F is exact) at 2 frames per second (a rate the node keeps up with on busy 2-core
 machines while the demo also records its debug image), zstd-compressed mcap chunks:
 
-- ``bags/synthetic_stereo``: 12 stereo frames, mono8, ``/left/image_raw`` + ``/right/image_raw``;
+- ``bags/synthetic_stereo``: 12 stereo frames, mono8, ``/left/image_raw`` + ``/right/image_raw``
+  with ``/left/camera_info`` + ``/right/camera_info`` (a converged rig: R and P rectifying);
 - ``bags/synthetic_motion``: 13 frames (12 pairs), PNG ``/image_raw/compressed`` (the node's
-  ``transport:=compressed``).
+  ``transport:=compressed``) with ``/camera_info``.
 
 All carry ``/ground_truth/fundamental``. The output is deterministic (fixed seeds and stamps).
 """

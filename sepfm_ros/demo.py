@@ -24,7 +24,9 @@ from pathlib import Path
 
 import cv2
 
-from sepfm_ros.ros.bag_io import BagError, BagReader, check_output_path
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.writer import check_output_path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 DEFAULT_BAG = "synthetic_stereo"
@@ -93,7 +95,7 @@ def replay_through_node(
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
-    from sepfm_ros.ros.bag_io import BagWriter
+    from sepfm_ros.ros.bags.writer import BagWriter
     from sepfm_ros.ros.process import detect_inputs, expected_pairs, parse_params
     from sepfm_ros.ros.record import Recorder
     from sepfm_ros.ros.replay import Replayer

@@ -21,16 +21,10 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header, String
 
 from sepfm_ros.demo import bundled_bags_dir
-from sepfm_ros.ros.bag_io import (
-    BagCorruptError,
-    BagNotFoundError,
-    BagReader,
-    BagWriter,
-    OutputExistsError,
-    RawMessage,
-    header_stamp_ns,
-    write_bag,
-)
+from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, OutputExistsError
+from sepfm_ros.ros.bags.reader import BagReader, RawMessage
+from sepfm_ros.ros.bags.types import header_stamp_ns
+from sepfm_ros.ros.bags.writer import BagWriter, write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image
 from sepfm_ros.ros.results import read_results
 

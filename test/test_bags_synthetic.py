@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from sepfm_ros.demo import bundled_bags_dir
-from sepfm_ros.ros.bag_io import TYPESTORE, BagReader
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.types import TYPESTORE
 from sepfm_ros.ros.image_conversion import message_to_numpy
 from sepfm_ros.ros.make_bag import bag_messages, synthetic_frames
 from sepfm_ros.synthetic.scene import Camera, Plane, Scene, intrinsics, look_at, render
@@ -90,10 +91,13 @@ def test_bundled_bags_are_reproducible(name, kind, n, encoding):
 
 
 def _content(msgtype: str, data: bytes) -> tuple:
-    """(stamp, frame_id, layout..., pixels or F) of an Image/CompressedImage in a bag."""
+    """(stamp, frame_id, layout..., pixels, F or camera matrices) of a message in a bag."""
     msg = TYPESTORE.deserialize_cdr(data, msgtype)
     fields: list = [msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id]
-    if msgtype.endswith("CompressedImage"):
+    if msgtype.endswith("CameraInfo"):
+        fields += [msg.height, msg.width, msg.distortion_model]
+        fields += [np.concatenate([msg.d, msg.k, msg.r, msg.p])]
+    elif msgtype.endswith("CompressedImage"):
         fields += [msg.format, message_to_numpy(msg, "bgr8")]
     elif msg.encoding == "64FC1":
         fields += [msg.height, msg.width, np.frombuffer(bytes(msg.data), "<f8")]

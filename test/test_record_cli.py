@@ -12,7 +12,7 @@ import rclpy
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from sepfm_ros.ros.bag_io import BagReader
+from sepfm_ros.ros.bags.reader import BagReader
 
 
 def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_domain_id):

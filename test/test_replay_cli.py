@@ -15,7 +15,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
 
 from sepfm_ros.demo import bundled_bags_dir
-from sepfm_ros.ros.bag_io import BagReader
+from sepfm_ros.ros.bags.reader import BagReader
 
 BAG = bundled_bags_dir() / "synthetic_stereo"  # 12 stereo frames at 2 Hz
 

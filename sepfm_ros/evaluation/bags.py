@@ -2,15 +2,17 @@
 
 Two kinds of bag are read (see :mod:`sepfm_ros.ros.make_bag` and :mod:`sepfm_ros.ros.process`):
 
-- an *input bag* with image topics (stereo ``/left/image_raw`` + ``/right/image_raw`` or motion
-  ``/image_raw``, raw or compressed) and ``/ground_truth/fundamental``: the pairs are the ones the
-  node would form (:func:`sepfm_ros.ros.process.iter_pairs`, default node parameters), each
+- an *input bag* with image topics (the ``--left``/``--right`` or ``--image`` topics when given,
+  else picked from the bag as ``process`` does, see :mod:`sepfm_ros.ros.bags.inputs`) and
+  ``/ground_truth/fundamental``: the pairs are the ones ``process`` forms
+  (:func:`sepfm_ros.ros.process.iter_pairs`, default node parameters), each
   scored against the GT F with the pair's stamp. The decoded frames are written as PNG files into
   a folder (under the matches cache), so matches are cached by image content like manifest pairs.
 - a bag written by ``process`` (``/sepfm/...`` outputs plus the copied ground truth): the pairs are
   the node's own matches (``~/matches``) with the GT F of the same stamp, as points entries.
 
-Bag problems (missing, corrupt, no ground truth, no images) become one :class:`PairError` per bag,
+Bags are rosbag2 (sqlite3, mcap) or ROS 1 ``.bag`` files. Bag problems (missing, corrupt, no
+ground truth, no images) become one :class:`PairError` per bag,
 and a pair without ground truth or with an undecodable image one per pair; nothing raises. This
 module needs the ROS message packages (rclpy); the evaluation imports it only for ``--bags``.
 """
@@ -23,18 +25,21 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
-from sepfm_ros.ros.bag_io import GROUND_TRUTH_TOPIC, BagError, BagReader, format_stamp
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.inputs import detect_inputs
+from sepfm_ros.ros.bags.reader import BAG_SUFFIXES, BagReader
+from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
 from sepfm_ros.ros.messages import stamp_ns
-from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params
+from sepfm_ros.ros.process import iter_pairs, pairing_slop_ns, parse_params, validate_inputs
 from sepfm_ros.ros.results import OUTPUT_NAMESPACE, output_topics, read_ground_truth, read_results
 
 
 def is_bag(path: Path) -> bool:
-    """A rosbag2 directory (with metadata.yaml) or a bare .mcap / .db3 file."""
+    """A rosbag2 directory (with metadata.yaml) or a bare .mcap / .db3 / ROS 1 .bag file."""
     if path.is_dir():
         return (path / "metadata.yaml").is_file()
-    return path.suffix in (".mcap", ".db3") and path.is_file()
+    return path.suffix in BAG_SUFFIXES and path.is_file()
 
 
 def find_bags(path: Path) -> list[Path]:
@@ -55,14 +60,17 @@ def _size(text: str) -> tuple[int, int] | None:
 
 
 def _input_bag_pairs(
-    bag: Path, reader: BagReader, frames_dir: Path
+    bag: Path, reader: BagReader, frames_dir: Path, topics: dict[str, str | None]
 ) -> tuple[list[PairSpec], list[PairError]]:
-    spec = detect_inputs(reader)
+    spec = detect_inputs(reader, None, topics.get("left"), topics.get("right"), topics.get("image"))
+    params = parse_params([])
+    stamps = validate_inputs(reader, spec)
+    slop_ns = pairing_slop_ns(params, stamps[spec.topics[0]], False)
     gt = read_ground_truth(bag)
     pairs, errors = [], []
     out = frames_dir / bag.name
     out.mkdir(parents=True, exist_ok=True)
-    for job in iter_pairs(reader, spec, parse_params([])):
+    for job in iter_pairs(reader, spec, params, slop_ns):
         stamp = stamp_ns(job.header.stamp)
         pid = f"{bag.name}@{format_stamp(stamp)}"
         try:
@@ -114,13 +122,18 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
 
 
 def load_bag_pairs(
-    path: str | Path, frames_dir: str | Path
+    path: str | Path,
+    frames_dir: str | Path,
+    left: str | None = None,
+    right: str | None = None,
+    image: str | None = None,
 ) -> tuple[list[PairSpec], list[PairError]]:
     """Pairs with ground truth from a bag or a folder of bags.
 
     Args:
-        path: a bag (directory or .mcap/.db3) or a folder holding bags.
+        path: a bag (directory, .mcap/.db3 or ROS 1 .bag) or a folder holding bags.
         frames_dir: where decoded frames of input bags are written (one subfolder per bag).
+        left, right, image: input topics of input bags (None: picked from each bag).
     Returns:
         (pairs, errors): errors name the bag (or pair) and the problem.
     """
@@ -138,7 +151,12 @@ def load_bag_pairs(
                     raise BagError(f"no {GROUND_TRUTH_TOPIC} topic: nothing to score against")
                 processed = bool(outputs & set(reader.topics))
                 if not processed:
-                    p, e = _input_bag_pairs(bag, reader, Path(frames_dir))
+                    p, e = _input_bag_pairs(
+                        bag,
+                        reader,
+                        Path(frames_dir),
+                        {"left": left, "right": right, "image": image},
+                    )
             if processed:
                 p, e = _processed_bag_pairs(bag)
         except BagError as exc:

@@ -11,8 +11,9 @@ in the report with the reason; they do not stop the run. Exit code 0 when at lea
 evaluated, 1 when none was, 2 on bad arguments or an unreadable manifest.
 
 ``--bags PATH`` (repeatable) adds pairs from a bag or a folder of bags with ground truth: input
-bags made by ``make_bag`` (pairs as the node forms them) or bags written by ``process`` (the
-node's own matches); see :mod:`sepfm_ros.evaluation.bags`.
+bags (pairs as ``process`` forms them; rosbag2 sqlite3/mcap or ROS 1 ``.bag``; input topics from
+``--left``/``--right`` or ``--image``, else picked from each bag) or bags written by ``process``
+(the node's own matches); see :mod:`sepfm_ros.evaluation.bags`.
 """
 
 from __future__ import annotations
@@ -60,8 +61,13 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         default=[],
         help="a bag, or a folder of bags, with /ground_truth/fundamental: input bags (images, "
-        "as made by make_bag) or bags written by process; repeatable",
+        "as made by make_bag or recorded) or bags written by process; repeatable",
     )
+    p.add_argument("--left", metavar="TOPIC", help="--bags: stereo left image topic (with --right)")
+    p.add_argument(
+        "--right", metavar="TOPIC", help="--bags: stereo right image topic (with --left)"
+    )
+    p.add_argument("--image", metavar="TOPIC", help="--bags: motion image topic")
     p.add_argument(
         "--root",
         type=Path,
@@ -166,7 +172,7 @@ def main(argv: list[str]) -> int:
 
         frames_dir = (cache_dir or args.out) / "bag_frames"
         for bag in args.bags:
-            p, e = load_bag_pairs(bag, frames_dir)
+            p, e = load_bag_pairs(bag, frames_dir, args.left, args.right, args.image)
             pairs += p
             errors += e
     pairs = select_pairs(pairs, args.scenes, args.max_pairs)

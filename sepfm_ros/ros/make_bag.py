@@ -9,11 +9,14 @@ Sources (one of):
   exact ground truth.
 
 Topics: stereo ``/left/image_raw`` + ``/right/image_raw`` with equal stamps, motion ``/image_raw``
-(``.../compressed`` with ``--encoding compressed``). When the cameras are known the bag also holds
-``/ground_truth/fundamental``: sensor_msgs/Image 64FC1 3x3 row-major F with ``x_b^T F x_a = 0``
-(a = left or previous frame, b = right or current frame), stamped like the node's
-``~/fundamental`` (the left image's stamp in stereo, the current frame's in motion). Stamps are
-``--start-time`` + k / ``--rate``, message log times equal the stamps.
+(``.../compressed`` with ``--encoding compressed``), frame ids ``left_camera_optical_frame``,
+``right_camera_optical_frame``, ``camera_optical_frame``. When the cameras are known the bag also
+holds a ``sensor_msgs/CameraInfo`` per camera next to its images (``/left/camera_info``,
+``/right/camera_info``, ``/camera_info``; same stamp and frame id as the image, see
+:func:`camera_infos`) and ``/ground_truth/fundamental``: sensor_msgs/Image 64FC1 3x3 row-major
+F with ``x_b^T F x_a = 0`` (a = left or previous frame, b = right or current frame), stamped like
+the node's ``~/fundamental`` (the left image's stamp in stereo, the current frame's in motion).
+Stamps are ``--start-time`` + k / ``--rate``, message log times equal the stamps.
 """
 
 from __future__ import annotations
@@ -24,6 +27,7 @@ import sys
 from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import cv2
 import numpy as np
@@ -31,14 +35,9 @@ from rclpy.serialization import serialize_message
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry import fundamental_from_cameras
-from sepfm_ros.ros.bag_io import (
-    COMPRESSED_IMAGE,
-    GROUND_TRUTH_TOPIC,
-    IMAGE,
-    BagError,
-    BagWriter,
-    check_output_path,
-)
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.types import COMPRESSED_IMAGE, GROUND_TRUTH_TOPIC, IMAGE
+from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.image_conversion import numpy_to_compressed, numpy_to_image
 from sepfm_ros.ros.messages import fundamental_to_image
 
@@ -47,6 +46,96 @@ SHARED_SEQUENCES = ("kitti_stereo", "kitti_motion", "templeRing")
 DEFAULT_START_TIME_S = 1_700_000_000.0
 STEREO_TOPICS = ("/left/image_raw", "/right/image_raw")
 MOTION_TOPIC = "/image_raw"
+STEREO_FRAMES = ("left_camera_optical_frame", "right_camera_optical_frame")
+MOTION_FRAME = "camera_optical_frame"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+RECTIFIED_ANGLE_RAD = 1e-4  # a stereo rig whose relative rotation is below this is rectified
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """The ``sensor_msgs/CameraInfo`` matrices of one camera (plumb_bob, D = 0).
+
+    Attributes:
+        K: (3, 3) intrinsics of the images as recorded, pixels.
+        R: (3, 3) rectification rotation (identity for a single camera or a rectified rig).
+        P: (3, 4) projection in the rectified frame, pixels; the right camera of a stereo rig
+            has ``P[0, 3] = -fx' * B`` (B = baseline in the cameras' length unit), as in ROS.
+    """
+
+    K: np.ndarray
+    R: np.ndarray
+    P: np.ndarray
+
+
+def decompose_camera(P: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(K, R, t) with ``P ~ K [R | t]``, K upper triangular with positive diagonal, K[2,2] = 1."""
+    K, R, C = cv2.decomposeProjectionMatrix(np.asarray(P, np.float64))[:3]
+    signs = np.diag(np.sign(np.diag(K)))  # make K's diagonal positive (R absorbs the signs)
+    K, R = K @ signs, signs @ R
+    if np.linalg.det(R) < 0:  # P was given up to a negative scale
+        R = -R
+    C = C[:3, 0] / C[3, 0]
+    return K / K[2, 2], R, -R @ C
+
+
+def camera_infos(cameras: tuple[np.ndarray, ...], size: tuple[int, int]) -> tuple[Calibration, ...]:
+    """CameraInfo matrices of a monocular camera (1 P) or a stereo rig (left, right P).
+
+    Args:
+        cameras: (3, 4) projection matrices ``K [R | t]`` in a common world frame.
+        size: (width, height) of the images, pixels.
+    Returns:
+        One :class:`Calibration` per camera. A single camera: R = I, P = [K | 0]. A stereo rig
+        whose cameras are parallel (rectified, KITTI): R = I, P = [K | 0] and
+        [K_right | (-fx B, 0, 0)]. A converged or offset rig (raw images): R and P from
+        ``cv2.stereoRectify`` (zero disparity at infinity), the way ROS's stereo calibration
+        fills them.
+    """
+    parts = [decompose_camera(P) for P in cameras]
+    if len(parts) == 1:
+        K = parts[0][0]
+        return (Calibration(K, np.eye(3), np.hstack([K, np.zeros((3, 1))])),)
+    (K_l, R_l, t_l), (K_r, R_r, t_r) = parts
+    R_rel = R_r @ R_l.T
+    t_rel = t_r - R_rel @ t_l
+    angle = float(np.linalg.norm(cv2.Rodrigues(R_rel)[0]))
+    if angle < RECTIFIED_ANGLE_RAD:
+        P_l = np.hstack([K_l, np.zeros((3, 1))])
+        P_r = np.hstack([K_r, np.zeros((3, 1))])
+        P_r[0, 3] = K_r[0, 0] * t_rel[0]  # Tx = -fx * B
+        return Calibration(K_l, np.eye(3), P_l), Calibration(K_r, np.eye(3), P_r)
+    zeros = np.zeros(5)
+    R1, R2, P1, P2 = cv2.stereoRectify(
+        K_l,
+        zeros,
+        K_r,
+        zeros,
+        size,
+        R_rel,
+        t_rel.reshape(3, 1),
+        flags=cv2.CALIB_ZERO_DISPARITY,
+        alpha=0,
+    )[:4]
+    return Calibration(K_l, R1, P1), Calibration(K_r, R2, P2)
+
+
+def camera_info_message(calibration: Calibration, size: tuple[int, int], header: Header) -> Any:
+    """A ``sensor_msgs/CameraInfo`` (plumb_bob, D = 0) for images of ``size`` (width, height)."""
+    from sensor_msgs.msg import CameraInfo
+
+    msg = CameraInfo(header=header, width=int(size[0]), height=int(size[1]))
+    msg.distortion_model = "plumb_bob"
+    msg.d = [0.0] * 5
+    msg.k = [float(v) for v in calibration.K.reshape(-1)]
+    msg.r = [float(v) for v in calibration.R.reshape(-1)]
+    msg.p = [float(v) for v in calibration.P.reshape(-1)]
+    return msg
+
+
+def camera_info_topic(image_topic: str) -> str:
+    """``/left/image_raw`` -> ``/left/camera_info`` (the image_transport convention)."""
+    return image_topic.rsplit("/", 1)[0] + "/camera_info"
 
 
 @dataclass(frozen=True)
@@ -165,28 +254,39 @@ def bag_messages(
     for k, frame in enumerate(frames):
         stamp = t0 + k * dt
         images = frame.load()
+        calibrations = None
+        if frame.cameras is not None:
+            h, w = images[0].shape[:2]
+            calibrations = camera_infos(frame.cameras, (w, h))
         if mode == "stereo":
-            for topic, img, fid in zip(
-                STEREO_TOPICS, images, ("camera_left", "camera_right"), strict=True
+            for i, (topic, img, fid) in enumerate(
+                zip(STEREO_TOPICS, images, STEREO_FRAMES, strict=True)
             ):
+                hdr = _header(stamp, fid)
                 yield (
                     topic + suffix,
                     msgtype,
                     stamp,
-                    image_bytes(img, encoding, _header(stamp, fid), compressed_format),
+                    image_bytes(img, encoding, hdr, compressed_format),
                 )
+                if calibrations is not None:
+                    info = camera_info_message(calibrations[i], img.shape[1::-1], hdr)
+                    yield camera_info_topic(topic), CAMERA_INFO, stamp, serialize_message(info)
             if frame.cameras is not None:
                 F = fundamental_from_cameras(frame.cameras[0], frame.cameras[1])
-                msg = fundamental_to_image(F, _header(stamp, "camera_left"))
+                msg = fundamental_to_image(F, _header(stamp, STEREO_FRAMES[0]))
                 yield GROUND_TRUTH_TOPIC, IMAGE, stamp, serialize_message(msg)
         else:
-            hdr = _header(stamp, "camera")
+            hdr = _header(stamp, MOTION_FRAME)
             yield (
                 MOTION_TOPIC + suffix,
                 msgtype,
                 stamp,
                 image_bytes(images[0], encoding, hdr, compressed_format),
             )
+            if calibrations is not None:
+                info = camera_info_message(calibrations[0], images[0].shape[1::-1], hdr)
+                yield camera_info_topic(MOTION_TOPIC), CAMERA_INFO, stamp, serialize_message(info)
             if frame.cameras is not None and prev_cam is not None:
                 F = fundamental_from_cameras(prev_cam, frame.cameras[0])
                 yield (

@@ -1,10 +1,15 @@
 """``sepfm_ros process BAG -o OUT``: the node's pipeline over a bag, without DDS.
 
-Reads the input images of BAG (stereo ``/left/image_raw`` + ``/right/image_raw``, or motion
-``/image_raw``; ``.../compressed`` when the bag holds CompressedImage), pairs them exactly as the
-node does (the node's approximate-time policy for stereo, frame t - ``frame_gap`` and t for
-motion), runs the same :class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the same parameters
-(``-p name:=value``, the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
+BAG is a rosbag2 bag (sqlite3 or mcap) or a ROS 1 ``.bag`` file. The input images are the topics
+given with ``--left TOPIC --right TOPIC`` (stereo) or ``--image TOPIC`` (motion), Image or
+CompressedImage; without them they are picked from the bag (one camera: motion; two whose names
+differ by left/right: stereo; the pick is printed) or, when the bag holds several cameras, an
+error lists its image topics. The images are paired as the node does (its approximate-time
+policy for stereo, frame t - ``frame_gap`` and t for motion), except that stereo pairs form
+within half the left frame period unless ``-p sync_slop_s:=...`` is given, so a right camera that
+lags by 10-20 ms still pairs. The command runs the node's
+:class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the same parameters (``-p name:=value``,
+the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
 the node's outputs with the source stamps to OUT: ``/sepfm/fundamental``, ``/sepfm/matches``,
 ``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it).
 
@@ -12,7 +17,7 @@ A progress bar runs on stderr (``--print-done`` also prints a line ``done K/N ST
 each pair once its results are safely in OUT, for programs that watch the progress); at the end a
 summary (per-frame table with ``--table``) is printed,
 scored against the ground truth when the bag has it. Every result is flushed to OUT as soon as it
-is computed (see :class:`~sepfm_ros.ros.bag_io.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
+is computed (see :class:`~sepfm_ros.ros.bags.writer.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
 
 Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
@@ -37,20 +42,17 @@ from sensor_msgs.msg import CompressedImage, Image
 from tqdm import tqdm
 
 from sepfm_ros.pipeline.pipeline import Pipeline
-from sepfm_ros.ros.bag_io import (
-    COMPRESSED_IMAGE,
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
+from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.types import (
     DIAGNOSTIC_ARRAY,
     GROUND_TRUTH_TOPIC,
     IMAGE,
     POINTCLOUD2,
-    BagError,
-    BagReader,
-    BagWriter,
-    StampChecker,
-    TopicNotFoundError,
-    check_output_path,
     header_stamp_ns,
 )
+from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
 from sepfm_ros.ros.messages import (
     copy_header,
@@ -87,48 +89,6 @@ OUTPUT_QOS = Qos(
 )
 
 
-@dataclass(frozen=True)
-class InputSpec:
-    """Which topics of a bag feed the pipeline and how."""
-
-    mode: str  # "stereo" or "motion"
-    transport: str  # "raw" or "compressed"
-    topics: tuple[str, ...]  # (left, right) or (image,)
-
-    def node_params(self) -> list[str]:
-        """``--ros-args`` for a node that consumes this bag as recorded."""
-        return ["-p", f"mode:={self.mode}", "-p", f"transport:={self.transport}"]
-
-
-def detect_inputs(reader: BagReader, mode: str | None = None) -> InputSpec:
-    """Find the input topics of a bag (stereo preferred when ``mode`` is None).
-
-    Raises TopicNotFoundError (no image topics) or UnknownTypeError (wrong message type).
-    """
-    candidates = []
-    for transport, suffix in (("raw", ""), ("compressed", "/compressed")):
-        stereo = (f"/left/image_raw{suffix}", f"/right/image_raw{suffix}")
-        motion = (f"/image_raw{suffix}",)
-        candidates.append(("stereo", transport, stereo))
-        candidates.append(("motion", transport, motion))
-    for m, transport, topics in candidates:
-        if mode not in (None, m):
-            continue
-        if all(t in reader.topics for t in topics):
-            expected = COMPRESSED_IMAGE if transport == "compressed" else IMAGE
-            for t in topics:
-                reader.require(t, (expected,))
-            return InputSpec(m, transport, topics)
-    want = "left/image_raw + right/image_raw" if mode == "stereo" else "image_raw"
-    if mode is None:
-        want = "/left/image_raw + /right/image_raw (stereo) or /image_raw (motion)"
-    have = ", ".join(f"{t} ({i.msgtype})" for t, i in sorted(reader.topics.items()))
-    raise TopicNotFoundError(
-        f"bag {reader.path} has no input images: expected {want} (or .../compressed); "
-        f"it has: {have or 'no topics'}"
-    )
-
-
 @dataclass
 class PairJob:
     """One pair, as the node's worker gets it (a = left/earlier, b = right/current)."""
@@ -140,16 +100,21 @@ class PairJob:
     key_b: Any
 
 
-def iter_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> Iterator[PairJob]:
+def iter_pairs(
+    reader: BagReader, spec: InputSpec, params: dict[str, Any], slop_ns: int | None = None
+) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
+    ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     Raises StampOrderError when an input topic's header stamps repeat or go backwards.
     """
     msg_class = CompressedImage if spec.transport == "compressed" else Image
     checker = StampChecker()
     if spec.mode == "stereo":
+        if slop_ns is None:
+            slop_ns = int(round(params["sync_slop_s"] * 1e9))
         sync: ApproximateTimeSync[Any] = ApproximateTimeSync(
-            int(round(params["sync_slop_s"] * 1e9)), int(params["sync_queue_size"])
+            slop_ns, int(params["sync_queue_size"])
         )
         for i, raw in enumerate(reader.messages(spec.topics)):
             msg = deserialize_message(raw.data, msg_class)
@@ -180,14 +145,34 @@ def iter_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> It
                 yield PairJob(first[0], msg, copy_header(msg.header), first[1], stamp)
 
 
-def validate_inputs(reader: BagReader, spec: InputSpec) -> None:
-    """Scan the input topics' header stamps before any output exists.
+def validate_inputs(reader: BagReader, spec: InputSpec) -> dict[str, list[int]]:
+    """Scan the input topics' header stamps before any output exists; the stamps per topic (ns).
 
     Raises StampOrderError (repeated or backwards stamps) or BagCorruptError (unreadable data).
     """
     checker = StampChecker()
+    stamps: dict[str, list[int]] = {t: [] for t in spec.topics}
     for i, raw in enumerate(reader.messages(spec.topics)):
-        checker.check(raw.topic, header_stamp_ns(raw.data), i)
+        stamp = header_stamp_ns(raw.data)
+        checker.check(raw.topic, stamp, i)
+        stamps[raw.topic].append(stamp)
+    return stamps
+
+
+def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:
+    """The stereo pairing slop (ns) for a bag whose left header stamps are ``left_stamps``.
+
+    ``sync_slop_s`` when the user set it (``slop_given``); otherwise the larger of its default
+    and just under half the left stream's median frame period, so that each left frame pairs
+    with its nearest right frame even when a cheap rig's right camera lags by 10-20 ms (the
+    node's 5 ms default pairs none of them). Half a period can never pair a frame with a
+    neighbour's partner.
+    """
+    slop = int(round(params["sync_slop_s"] * 1e9))
+    if slop_given or len(left_stamps) < 2:
+        return slop
+    steps = sorted(b - a for a, b in zip(left_stamps, left_stamps[1:], strict=False))
+    return max(slop, steps[len(steps) // 2] // 2 - 1)
 
 
 def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> int:
@@ -236,8 +221,17 @@ def run_process(
     progress: bool = True,
     namespace: str = OUTPUT_NAMESPACE,
     on_done: Callable[[int, int, int], None] | None = None,
+    left: str | None = None,
+    right: str | None = None,
+    image: str | None = None,
+    slop_given: bool = False,
 ) -> tuple[int, int]:
     """Process ``bag`` into a new bag ``out``; returns (pairs processed, pairs expected).
+
+    The input topics are ``left``/``right`` or ``image`` when given, else picked from the bag
+    (:func:`~sepfm_ros.ros.bags.inputs.detect_inputs`; the pick is printed on stderr). Stereo
+    pairs form within :func:`pairing_slop_ns` (``slop_given``: ``sync_slop_s`` was set by the
+    user and is used as is).
 
     ``on_done(k, total, stamp_ns)`` is called after pair k's results were flushed to ``out``
     (they survive any interruption from then on).
@@ -252,8 +246,18 @@ def run_process(
     except ValueError as err:
         raise BagError(str(err)) from None
     with BagReader(bag) as reader:
-        spec = detect_inputs(reader, mode)
-        validate_inputs(reader, spec)
+        spec = detect_inputs(reader, mode, left, right, image)
+        stamps = validate_inputs(reader, spec)
+        slop_ns = None
+        if spec.mode == "stereo":
+            slop_ns = pairing_slop_ns(params, stamps[spec.topics[0]], slop_given)
+        if spec.picked:
+            print(
+                f"sepfm_ros process: input {spec.describe()} (picked from the bag's image "
+                "topics; choose with --left/--right or --image)",
+                file=sys.stderr,
+                flush=True,
+            )
         total = expected_pairs(reader, spec, params)
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
@@ -278,7 +282,7 @@ def run_process(
                 dynamic_ncols=True,
             )
             try:
-                for job in iter_pairs(reader, spec, params):
+                for job in iter_pairs(reader, spec, params, slop_ns):
                     for data in process_pair(pipeline, job, params, topics):
                         writer.write(data[0], stamp_ns(job.header.stamp), data[1])
                     writer.flush()  # every result survives a kill from now on
@@ -345,6 +349,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("bag", type=Path, help="input bag (directory or .mcap)")
     p.add_argument("-o", "--output", type=Path, required=True, help="output bag (must not exist)")
     p.add_argument("--mode", choices=("stereo", "motion"), help="default: from the bag's topics")
+    add_topic_arguments(p)
     p.add_argument(
         "-p",
         "--param",
@@ -361,6 +366,13 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         help="print 'done K/N SEC.NANOSEC' on stdout when a pair's results are safely written",
     )
     return p.parse_args(argv)
+
+
+def add_topic_arguments(p: argparse.ArgumentParser) -> None:
+    """``--left``/``--right``/``--image``: the input topics (shared by process and eval --bags)."""
+    p.add_argument("--left", metavar="TOPIC", help="stereo: left image topic (with --right)")
+    p.add_argument("--right", metavar="TOPIC", help="stereo: right image topic (with --left)")
+    p.add_argument("--image", metavar="TOPIC", help="motion: the image topic")
 
 
 def print_done(k: int, total: int, stamp: int) -> None:
@@ -381,6 +393,10 @@ def main(argv: list[str]) -> int:
             args.mode,
             not args.quiet,
             on_done=print_done if args.print_done else None,
+            left=args.left,
+            right=args.right,
+            image=args.image,
+            slop_given=any(p.startswith("sync_slop_s:=") for p in args.param),
         )
     except BagError as err:
         print(f"sepfm_ros process: error: {err}", file=sys.stderr)

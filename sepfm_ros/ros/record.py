@@ -31,7 +31,8 @@ from rosbags.interfaces import (
     QosTime,
 )
 
-from sepfm_ros.ros.bag_io import BagError, BagWriter, check_output_path
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.replay import absolute_topic, message_class, raise_keyboard_interrupt
 
 _INF = QosTime(2147483647, 4294967295)

@@ -1,18 +1,26 @@
 """``sepfm_ros replay BAG``: publish a bag into live topics with its recorded timing.
 
-Like ``ros2 bag play`` (not available from PyPI): messages are published as the recorded CDR
-bytes, unchanged, at their recorded log times scaled by ``--rate``, with the QoS the recorder saw
-offered (reliability, durability, history depth). ``--topics`` selects topics, ``--remap
-FROM:=TO`` renames them, ``--start-offset S`` skips the first S seconds, ``--loop`` repeats, and
-``--clock`` publishes ``/clock`` (rosgraph_msgs/Clock) with the bag's time so nodes with
-``use_sim_time:=true`` follow it. ``--wait-for TOPIC`` waits until TOPIC has a subscriber before
-starting (useful when a node is still starting up). A progress line runs on stderr.
+Like ``ros2 bag play`` (not available from PyPI): BAG is a rosbag2 bag (sqlite3 or mcap) or a
+ROS 1 ``.bag`` (converted to ROS 2 messages as it plays); messages are published as CDR bytes,
+unchanged, at their recorded log times scaled by ``-r/--rate``, with the QoS the recorder saw
+offered (reliability, durability, history depth). ``--topics`` selects topics,
+``--exclude-topics`` leaves some out, ``--remap FROM:=TO`` renames them (``--left L --right R`` /
+``--image I`` are short for remapping recorded camera topics onto the node's ``/left/image_raw``,
+``/right/image_raw`` / ``/image_raw``), ``--start-offset S`` skips the first S seconds,
+``-l/--loop`` repeats (each pass publishes the recorded messages again, so header stamps jump back
+to the bag's start, as with ``ros2 bag play --loop``), and ``--clock`` publishes ``/clock``
+(rosgraph_msgs/Clock) with the bag's time so nodes with ``use_sim_time:=true`` follow it.
+``--wait-for TOPIC`` waits until TOPIC has a subscriber before starting (useful when a node is
+still starting up). A progress line runs on stderr; playing starts at once (message counts come
+from the bag's metadata).
 
-Bad input (missing bag, corrupt or truncated storage, unknown topic or message type) gives a
+Topics whose message type has no Python package here (``/tf`` without ``tf2_msgs``, a custom
+type) are skipped with one warning each, and the rest is played, as ``ros2 bag play`` does. Bad
+input (missing bag, corrupt or truncated storage, unknown topic, nothing playable) gives a
 message and exit code 1, before anything is published. Header stamps that repeat, go backwards or
 leave gaps (an interval over ``GAP_FACTOR`` times the topic's median) are played as recorded, the
-way a real camera would deliver them, after a warning with the counts per topic; ``--strict``
-refuses such bags instead (exit code 1).
+way a real camera would deliver them, and counted per topic in a warning after the first pass;
+``--strict`` checks them before playing and refuses such bags instead (exit code 1).
 """
 
 from __future__ import annotations
@@ -33,15 +41,10 @@ from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPo
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 from tqdm import tqdm
 
-from sepfm_ros.ros.bag_io import (
-    BagError,
-    BagReader,
-    StampChecker,
-    TopicNotFoundError,
-    UnknownTypeError,
-    has_header,
-    header_stamp_ns,
-)
+from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeError
+from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
+from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
 
 GAP_FACTOR = 3.0
 
@@ -131,17 +134,28 @@ def absolute_topic(topic: str) -> str:
 class Replayer:
     """Publishes a bag's messages on ``node`` with their recorded timing.
 
+    Topics whose message type has no Python package here (``/tf`` without ``tf2_msgs``, a
+    custom type) are skipped, each named once in :attr:`skipped` with the reason, and the rest
+    is played, as ``ros2 bag play`` does. Nothing is read before playing starts (counts come
+    from the bag's metadata) unless ``strict`` asks for the stamps to be checked first; header
+    stamp irregularities are counted while the first pass plays (:meth:`stamp_warnings`).
+
     Args:
         node: the rclpy node that owns the publishers (it need not be spun).
-        bag: bag path.
+        bag: bag path (rosbag2 folder, ``.mcap``/``.db3``, or ROS 1 ``.bag``).
         topics: topics to play (all when empty).
+        exclude: topics not to play.
         remap: recorded topic -> published topic.
         rate: playback speed factor (> 0).
         start_offset_s: skip this many seconds from the bag's start.
-        loop: play again from the start after the end (until :meth:`stop`).
+        loop: play again from the start after the end (until :meth:`stop`); each pass
+            publishes the recorded messages unchanged, so header stamps jump back to the bag's
+            first stamp when a pass starts (as with ``ros2 bag play --loop``).
         clock: publish /clock with the bag's time at ``clock_hz``.
-        strict: refuse (StampOrderError) a bag whose header stamps repeat or go backwards;
-            otherwise they are counted in :attr:`stamp_reports` and played as recorded.
+        strict: refuse (StampOrderError) a bag whose header stamps repeat or go backwards,
+            before anything is published (this reads the stamped topics once before playing);
+            otherwise irregular stamps are counted in :attr:`stamp_reports` and played as
+            recorded.
     """
 
     def __init__(
@@ -156,6 +170,7 @@ class Replayer:
         clock: bool = False,
         clock_hz: float = 100.0,
         strict: bool = False,
+        exclude: Sequence[str] = (),
     ) -> None:
         if not rate > 0:
             raise BagError(f"--rate must be > 0, got {rate}")
@@ -170,19 +185,34 @@ class Replayer:
         wanted = [absolute_topic(t) for t in topics] or sorted(self.reader.topics)
         for t in wanted:
             self.reader.require(t)
-        self.topics = wanted
-        self.reader.check_known_types(wanted)
+        excluded = {absolute_topic(t) for t in exclude}
+        wanted = [t for t in wanted if t not in excluded]
+        self.skipped: dict[str, str] = {}
+        classes = {}
+        for t in wanted:
+            try:
+                classes[t] = message_class(self.reader.topics[t].msgtype)
+            except UnknownTypeError as err:
+                self.skipped[t] = str(err)
+        self.topics = [t for t in wanted if t in classes]
+        if not self.topics:
+            why = "; ".join(f"{t}: {r}" for t, r in self.skipped.items()) or "no topic selected"
+            raise BagError(f"nothing to play from {self.reader.path} ({why})")
         self.stamp_reports: dict[str, StampReport] = {}
-        self._check_stamps(strict)
+        self._stamped = [t for t in self.topics if has_header(self.reader.topics[t].msgtype)]
+        if strict:
+            self._check_stamps_strict()
         self.start_ns = self.reader.start_time_ns + int(round(start_offset_s * 1e9))
         self.publishers = {}
-        for t in wanted:
+        for t in self.topics:
             info = self.reader.topics[t]
-            cls = message_class(info.msgtype)
             self.publishers[t] = node.create_publisher(
-                cls, self.remap.get(t, t), qos_from_recorded(info.qos)
+                classes[t], self.remap.get(t, t), qos_from_recorded(info.qos)
             )
-        self.total = sum(1 for m in self.reader.messages(wanted) if m.log_time_ns >= self.start_ns)
+        # messages per pass from the metadata (unknown with a start offset: no pre-pass)
+        self.total: int | None = (
+            sum(self.reader.topics[t].count for t in self.topics) if start_offset_s == 0 else None
+        )
         self._clock_pub = None
         self._clock_hz = clock_hz
         self._bag_now_ns = self.start_ns
@@ -194,19 +224,18 @@ class Replayer:
                 Clock, "/clock", QoSProfile(depth=1, reliability=ReliabilityPolicy.RELIABLE)
             )
 
-    def _check_stamps(self, strict: bool) -> None:
-        with_header = [t for t in self.topics if has_header(self.reader.topics[t].msgtype)]
-        if strict:
-            checker = StampChecker()
-            for i, msg in enumerate(self.reader.messages(with_header)):
-                checker.check(msg.topic, header_stamp_ns(msg.data), i)
-        stamps: dict[str, list[int]] = {t: [] for t in with_header}
-        for msg in self.reader.messages(with_header):
-            stamps[msg.topic].append(header_stamp_ns(msg.data))
-        self.stamp_reports = {t: stamp_irregularities(s) for t, s in stamps.items()}
+    def _check_stamps_strict(self) -> None:
+        checker = StampChecker()
+        for i, msg in enumerate(self.reader.messages(self._stamped)):
+            checker.check(msg.topic, header_stamp_ns(msg.data), i)
+
+    def skip_warnings(self) -> list[str]:
+        """One line per skipped topic: its name and why it cannot be played here."""
+        return [f"warning: skipping {t}: {reason}" for t, reason in sorted(self.skipped.items())]
 
     def stamp_warnings(self) -> list[str]:
-        """One line per topic with irregular header stamps (empty when all are regular)."""
+        """One line per topic with irregular header stamps in the first pass played (after
+        :meth:`run`; empty when all were regular)."""
         lines = []
         for topic, r in sorted(self.stamp_reports.items()):
             if r.irregular:
@@ -260,12 +289,13 @@ class Replayer:
             disable=not progress,
             dynamic_ncols=True,
         )
+        stamped = set(self._stamped)
+        stamps: dict[str, list[int]] = {t: [] for t in self._stamped}
         try:
             first_pass = True
             while not self._stop.is_set():
                 if not first_pass:  # a new loop: bag time (and /clock) starts again
                     base_wall[0] = time.monotonic()
-                first_pass = False
                 for msg in self.reader.messages(self.topics, start_ns=self.start_ns):
                     target = base_wall[0] + (msg.log_time_ns - self.start_ns) / 1e9 / self.rate
                     while not self._stop.is_set():
@@ -276,16 +306,23 @@ class Replayer:
                     if self._stop.is_set():
                         break
                     self.publishers[msg.topic].publish(msg.data)
+                    if first_pass and msg.topic in stamped:
+                        stamps[msg.topic].append(header_stamp_ns(msg.data))
                     published += 1
                     bar.update(1)
                     bar.set_postfix_str(
                         f"t={(msg.log_time_ns - self.reader.start_time_ns) / 1e9:.2f}s",
                         refresh=False,
                     )
+                if first_pass:
+                    self.stamp_reports = {k: stamp_irregularities(s) for k, s in stamps.items()}
+                    first_pass = False
                 if not self.loop:
                     break
                 bar.reset()
         finally:
+            if first_pass:  # interrupted in the first pass: report what was played
+                self.stamp_reports = {k: stamp_irregularities(s) for k, s in stamps.items()}
             self._stop.set()
             bar.close()
             if clock_thread is not None:
@@ -310,6 +347,22 @@ class Replayer:
             self.node.destroy_publisher(pub)
 
 
+def input_remaps(
+    reader: BagReader, left: str | None, right: str | None, image: str | None
+) -> dict[str, str]:
+    """Remaps that publish the chosen recorded image topics under the node's input names.
+
+    ``--left L --right R`` -> ``/left/image_raw`` and ``/right/image_raw``, ``--image I`` ->
+    ``/image_raw`` (``.../compressed`` appended for CompressedImage topics). Empty when no
+    topic is given. BagError subclasses for a bad combination, a missing or non-image topic.
+    """
+    if left is None and right is None and image is None:
+        return {}
+    spec = detect_inputs(reader, None, left, right, image)
+    suffix = COMPRESSED_SUFFIX if spec.transport == "compressed" else ""
+    return {src: dst + suffix for src, dst in zip(spec.topics, NODE_INPUTS[spec.mode], strict=True)}
+
+
 def raise_keyboard_interrupt(signum: int, frame: Any) -> None:
     """A SIGTERM handler: stop like Ctrl-C (so outputs are closed cleanly)."""
     raise KeyboardInterrupt
@@ -322,11 +375,32 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     p.add_argument("bag", type=Path)
-    p.add_argument("--rate", type=float, default=1.0, help="speed factor (default 1)")
-    p.add_argument("--loop", action="store_true", help="repeat until interrupted")
+    p.add_argument("-r", "--rate", type=float, default=1.0, help="speed factor (default 1)")
+    p.add_argument(
+        "-l",
+        "--loop",
+        action="store_true",
+        help="repeat until interrupted (header stamps jump back to the start at each pass)",
+    )
     p.add_argument("--start-offset", type=float, default=0.0, metavar="S", help="skip S seconds")
     p.add_argument("--topics", nargs="+", default=[], metavar="TOPIC", help="topics to play")
+    p.add_argument(
+        "--exclude-topics", nargs="+", default=[], metavar="TOPIC", help="topics not to play"
+    )
     p.add_argument("--remap", nargs="+", default=[], metavar="FROM:=TO", help="rename topics")
+    p.add_argument(
+        "--left",
+        metavar="TOPIC",
+        help="publish this recorded image topic as the node's left/image_raw (with --right)",
+    )
+    p.add_argument(
+        "--right",
+        metavar="TOPIC",
+        help="publish this recorded image topic as the node's right/image_raw (with --left)",
+    )
+    p.add_argument(
+        "--image", metavar="TOPIC", help="publish this recorded image topic as the node's image_raw"
+    )
     p.add_argument("--clock", action="store_true", help="publish /clock with the bag's time")
     p.add_argument("--clock-hz", type=float, default=100.0, help="/clock rate (default 100)")
     p.add_argument(
@@ -356,7 +430,8 @@ def main(argv: list[str]) -> int:
     ros_argv = argv[split:]
     try:
         remap = parse_remaps(args.remap)
-        BagReader(args.bag).close()  # fail fast on a bad bag, before DDS starts
+        with BagReader(args.bag) as reader:  # fail fast on a bad bag, before DDS starts
+            remap.update(input_remaps(reader, args.left, args.right, args.image))
     except BagError as err:
         print(f"sepfm_ros replay: error: {err}", file=sys.stderr)
         return 1
@@ -376,12 +451,15 @@ def main(argv: list[str]) -> int:
             args.clock,
             args.clock_hz,
             strict=args.strict,
+            exclude=args.exclude_topics,
         )
-        for line in replayer.stamp_warnings():
+        for line in replayer.skip_warnings():
             print(f"sepfm_ros replay: {line}", file=sys.stderr, flush=True)
         if args.wait_for:
             replayer.wait_for_subscribers(args.wait_for, args.wait_timeout)
         n = replayer.run(progress=not args.quiet)
+        for line in replayer.stamp_warnings():
+            print(f"sepfm_ros replay: {line}", file=sys.stderr, flush=True)
         print(f"replayed {n} messages from {args.bag}", file=sys.stderr)
         return 0
     except BagError as err:

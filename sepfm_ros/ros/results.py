@@ -18,7 +18,8 @@ from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image, PointCloud2
 
 from sepfm_ros.geometry import symmetric_epipolar_distance
-from sepfm_ros.ros.bag_io import GROUND_TRUTH_TOPIC, BagReader, format_stamp
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.messages import (
     ESTIMATE_STATUS_NAME,
     fundamental_from_image,

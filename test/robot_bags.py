@@ -1,0 +1,164 @@
+"""Bags written the way a robot records them, with rosbags alone (none of this package's tools).
+
+:func:`write_robot_bag` writes stereo frames as ``/camera/left/image_raw`` and
+``/camera/right/image_raw`` (mono8 sensor_msgs/Image), a ``sensor_msgs/CameraInfo`` per camera
+on ``/camera/<side>/camera_info``, and ``/tf`` (tf2_msgs/TFMessage, the camera in ``base_link``)
+at every frame, in rosbag2 sqlite3, rosbag2 mcap or ROS 1 format, optionally with the right
+camera's stamps (and log times) lagging the left by ``right_lag_ns``. Message log times are the
+header stamps, as ``ros2 bag record`` on the robot's clock gives them.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+from rosbags.rosbag1 import Writer as Writer1
+from rosbags.rosbag2 import StoragePlugin
+from rosbags.rosbag2 import Writer as Writer2
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+FORMATS = ("sqlite3", "mcap", "ros1")
+LEFT_TOPIC = "/camera/left/image_raw"
+RIGHT_TOPIC = "/camera/right/image_raw"
+IMAGE_T = "sensor_msgs/msg/Image"
+INFO_T = "sensor_msgs/msg/CameraInfo"
+TF_T = "tf2_msgs/msg/TFMessage"
+START_NS = 1_700_000_000 * 10**9
+
+
+def _typestore(fmt: str):
+    if fmt == "ros1":
+        ts = get_typestore(Stores.ROS1_NOETIC)
+        # tf2_msgs is not in rosbags' Noetic store; a ROS 1 bag carries its definition anyway
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_T))
+        return ts
+    return get_typestore(Stores.ROS2_JAZZY)
+
+
+def _header(ts, fmt: str, stamp_ns: int, frame_id: str, seq: int):
+    Time = ts.types["builtin_interfaces/msg/Time"]
+    stamp = Time(sec=stamp_ns // 10**9, nanosec=stamp_ns % 10**9)
+    Header = ts.types["std_msgs/msg/Header"]
+    if fmt == "ros1":
+        return Header(seq=seq, stamp=stamp, frame_id=frame_id)
+    return Header(stamp=stamp, frame_id=frame_id)
+
+
+def _image(ts, header, img: np.ndarray):
+    h, w = img.shape
+    return ts.types[IMAGE_T](
+        header=header,
+        height=h,
+        width=w,
+        encoding="mono8",
+        is_bigendian=0,
+        step=w,
+        data=np.ascontiguousarray(img, np.uint8).reshape(-1),
+    )
+
+
+def _camera_info(ts, fmt: str, header, size: tuple[int, int], K: np.ndarray, P: np.ndarray):
+    roi = ts.types["sensor_msgs/msg/RegionOfInterest"](
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    fields = {
+        "d": np.zeros(5),
+        "k": np.asarray(K, float).reshape(-1),
+        "r": np.eye(3).reshape(-1),
+        "p": np.asarray(P, float).reshape(-1),
+    }
+    if fmt == "ros1":
+        fields = {k.upper(): v for k, v in fields.items()}
+    return ts.types[INFO_T](
+        header=header,
+        height=size[1],
+        width=size[0],
+        distortion_model="plumb_bob",
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+        **fields,
+    )
+
+
+def _tf(ts, header, child: str):
+    g = ts.types
+    transform = g["geometry_msgs/msg/Transform"](
+        translation=g["geometry_msgs/msg/Vector3"](x=0.1, y=0.0, z=1.2),
+        rotation=g["geometry_msgs/msg/Quaternion"](x=-0.5, y=0.5, z=-0.5, w=0.5),
+    )
+    stamped = g["geometry_msgs/msg/TransformStamped"](
+        header=header, child_frame_id=child, transform=transform
+    )
+    return g[TF_T](transforms=[stamped])
+
+
+def bag_path(folder: Path, fmt: str, name: str = "robot") -> Path:
+    """Where :func:`write_robot_bag` writes: a folder for rosbag2, a ``.bag`` file for ROS 1."""
+    return folder / (f"{name}.bag" if fmt == "ros1" else f"{name}_{fmt}")
+
+
+def write_robot_bag(
+    path: Path,
+    fmt: str,
+    frames: Sequence[tuple[np.ndarray, np.ndarray]],
+    period_ns: int = 100_000_000,
+    right_lag_ns: int = 0,
+    K: np.ndarray | None = None,
+    baseline_m: float = 0.54,
+    topics: tuple[str, str] = (LEFT_TOPIC, RIGHT_TOPIC),
+    extra_image_topics: Sequence[str] = (),
+) -> Path:
+    """Write ``frames`` (left, right mono8 arrays) as a robot's stereo recording; returns ``path``.
+
+    ``extra_image_topics`` get a copy of the left image (for bags with more cameras than two).
+    """
+    if fmt not in FORMATS:
+        raise ValueError(f"fmt must be one of {FORMATS}")
+    ts = _typestore(fmt)
+    h, w = frames[0][0].shape
+    if K is None:
+        K = np.array([[700.0, 0, w / 2], [0, 700.0, h / 2], [0, 0, 1]])
+    P_left = np.hstack([K, np.zeros((3, 1))])
+    P_right = P_left.copy()
+    P_right[0, 3] = -K[0, 0] * baseline_m
+    if fmt == "ros1":
+        writer = Writer1(path)
+    else:
+        plugin = StoragePlugin.SQLITE3 if fmt == "sqlite3" else StoragePlugin.MCAP
+        writer = Writer2(path, version=9, storage_plugin=plugin)
+    info_topics = tuple(t.rsplit("/", 1)[0] + "/camera_info" for t in topics)
+    with writer:
+        conns = {}
+        for topic, msgtype in [
+            (topics[0], IMAGE_T),
+            (topics[1], IMAGE_T),
+            (info_topics[0], INFO_T),
+            (info_topics[1], INFO_T),
+            ("/tf", TF_T),
+            *[(t, IMAGE_T) for t in extra_image_topics],
+        ]:
+            conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
+        messages = []
+        for k, (left, right) in enumerate(frames):
+            t_left = START_NS + k * period_ns
+            t_right = t_left + right_lag_ns
+            hl = _header(ts, fmt, t_left, "left_camera_optical_frame", k)
+            hr = _header(ts, fmt, t_right, "right_camera_optical_frame", k)
+            messages += [
+                (t_left, "/tf", _tf(ts, _header(ts, fmt, t_left, "base_link", k), "camera"), TF_T),
+                (t_left, topics[0], _image(ts, hl, left), IMAGE_T),
+                (t_left, info_topics[0], _camera_info(ts, fmt, hl, (w, h), K, P_left), INFO_T),
+                (t_right, topics[1], _image(ts, hr, right), IMAGE_T),
+                (t_right, info_topics[1], _camera_info(ts, fmt, hr, (w, h), K, P_right), INFO_T),
+            ]
+            messages += [(t_left, t, _image(ts, hl, left), IMAGE_T) for t in extra_image_topics]
+        for t, topic, msg, msgtype in sorted(messages, key=lambda m: m[0]):
+            if fmt == "ros1":
+                data = ts.serialize_ros1(msg, msgtype)
+            else:
+                data = ts.serialize_cdr(msg, msgtype)
+            writer.write(conns[topic], t, bytes(data))
+    return path

@@ -43,3 +43,21 @@ def test_signal_during_kernel_compilation_exits_cleanly(sig, tmp_path, ros_domai
     assert "Traceback" not in out, out
     assert "kernels ready" not in out, out  # it stopped without finishing the compilation
     print(f"[startup] {sig.name} during kernel compilation: exit 0 after {elapsed:.2f} s")
+
+
+# Modules the live node never uses: bag reading and writing (rosbags' rosbag2/rosbag1 readers,
+# type system and serialisers) and the progress bar and plots of the offline commands. The
+# image encoding table of rosbags-image (rosbags.image) is used and allowed.
+NODE_FORBIDDEN = ("rosbags.rosbag2", "rosbags.rosbag1", "rosbags.typesys", "rosbags.serde")
+NODE_FORBIDDEN += ("rosbags.highlevel", "tqdm", "matplotlib")
+
+
+def test_node_command_imports_no_bag_or_progress_bar_modules():
+    pytest.importorskip("rclpy")
+    code = (
+        "import sys, sepfm_ros.cli, sepfm_ros.ros.node;"
+        f"bad = sorted(m for m in sys.modules if m.startswith({NODE_FORBIDDEN!r}));"
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, f"the node imports {r.stdout.strip()}\n{r.stderr[-2000:]}"

@@ -65,3 +65,126 @@ def test_geometry_core_imports_no_ros():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert r.returncode == 0, r.stdout + r.stderr
+
+
+# ------------------------------------------------------------------ package.xml and rosdep
+# Core packages of ROS 2 Jazzy (ros/rosdistro jazzy/distribution.yaml: repositories rclpy,
+# rcl_interfaces, common_interfaces, ament_index, launch, launch_ros): rosdep resolves them
+# as ros-jazzy-* packages.
+JAZZY_PACKAGES = {
+    "rclpy",
+    "builtin_interfaces",
+    "rcl_interfaces",
+    "rosgraph_msgs",
+    "sensor_msgs",
+    "std_msgs",
+    "diagnostic_msgs",
+    "ament_index_python",
+    "launch",
+    "launch_ros",
+}
+# Keys of ros/rosdistro rosdep/python.yaml, each read there with an Ubuntu rule that covers
+# Jazzy's 24.04 (a plain package list, no per-release list that leaves it out).
+ROSDISTRO_KEYS = {
+    "python3-numpy",
+    "python3-opencv",
+    "python3-scipy",
+    "python3-matplotlib",
+    "python3-tqdm",
+    "python3-ruamel.yaml",
+    "python3-pytest",
+    "python3-hypothesis",
+}
+# Keys rosdistro has whose Ubuntu rule lists only older releases: unresolvable on Jazzy.
+ROSDISTRO_KEYS_NOT_ON_NOBLE = {"python3-numba"}
+# Third-party top-level modules imported by the package, its launch file and its tests, and the
+# rosdep key that installs each (llvmlite is numba's code generator and comes with it).
+MODULE_KEYS = {
+    "numpy": "python3-numpy",
+    "cv2": "python3-opencv",
+    "scipy": "python3-scipy",
+    "matplotlib": "python3-matplotlib",
+    "tqdm": "python3-tqdm",
+    "ruamel": "python3-ruamel.yaml",
+    "rosbags": "python3-rosbags-pip",
+    "rosbags.image": "python3-rosbags-image-pip",
+    "numba": "python3-numba-pip",
+    "llvmlite": "python3-numba-pip",
+    "threadpoolctl": "python3-threadpoolctl",
+    "pytest": "python3-pytest",
+    "hypothesis": "python3-hypothesis",
+    **{name: name for name in JAZZY_PACKAGES},
+}
+# Imported only where present; the code and tests say so when it is missing.
+OPTIONAL_MODULES = {"poselib"}
+
+
+def _package_xml() -> dict[str, set[str]]:
+    import xml.etree.ElementTree as ET
+
+    root = ET.parse(REPO_ROOT / "package.xml").getroot()
+    kinds = ("depend", "exec_depend", "test_depend", "build_depend", "build_export_depend")
+    return {kind: {e.text.strip() for e in root.findall(kind)} for kind in kinds}
+
+
+def _rosdep_yaml() -> dict:
+    from ruamel.yaml import YAML
+
+    return dict(YAML(typ="safe").load((REPO_ROOT / "rosdep.yaml").read_text()))
+
+
+def _imported_modules(paths: list[Path], local: set[str]) -> set[str]:
+    """Third-party modules imported anywhere in ``paths`` ("rosbags.image" kept apart)."""
+    import ast
+
+    found = set()
+    for path in paths:
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.level == 0 and node.module:
+                names = [node.module]
+            for name in names:
+                top = name.split(".")[0]
+                if top in sys.stdlib_module_names or top in local:
+                    continue
+                found.add("rosbags.image" if name.startswith("rosbags.image") else top)
+    return found
+
+
+def test_every_package_xml_key_resolves_on_jazzy():
+    deps = _package_xml()
+    own = set(_rosdep_yaml())
+    used = set().union(*deps.values())
+    unknown = used - JAZZY_PACKAGES - ROSDISTRO_KEYS - own
+    assert not unknown, f"keys neither Jazzy packages nor verified rosdep keys: {unknown}"
+    assert not used & ROSDISTRO_KEYS_NOT_ON_NOBLE
+
+
+def test_rosdep_yaml_defines_only_missing_keys_for_ubuntu_and_debian():
+    rules = _rosdep_yaml()
+    used = set().union(*_package_xml().values())
+    for key, rule in rules.items():
+        assert key in used, f"{key} is defined in rosdep.yaml but not used in package.xml"
+        assert key not in ROSDISTRO_KEYS | ROSDISTRO_KEYS_NOT_ON_NOBLE | JAZZY_PACKAGES, key
+        assert {"ubuntu", "debian"} <= set(rule), f"{key} lacks an ubuntu or debian rule"
+        if key.endswith("-pip"):
+            assert rule["ubuntu"]["pip"]["packages"], key
+
+
+def test_every_imported_module_is_declared_in_package_xml():
+    deps = _package_xml()
+    exec_keys = deps["depend"] | deps["exec_depend"]
+    test_keys = exec_keys | deps["test_depend"]
+    runtime = _imported_modules(
+        sorted((REPO_ROOT / "sepfm_ros").rglob("*.py")) + sorted(REPO_ROOT.glob("launch/*.py")),
+        {"sepfm_ros"},
+    )
+    test_files = sorted((REPO_ROOT / "test").glob("*.py"))
+    tests = _imported_modules(test_files, {"sepfm_ros"} | {p.stem for p in test_files})
+    for modules, keys, what in ((runtime, exec_keys, "exec_depend"), (tests, test_keys, "test")):
+        unmapped = modules - set(MODULE_KEYS) - OPTIONAL_MODULES
+        assert not unmapped, f"imports without a known rosdep key: {unmapped}"
+        missing = {MODULE_KEYS[m] for m in modules - OPTIONAL_MODULES} - keys
+        assert not missing, f"imported but not declared as {what} in package.xml: {missing}"

@@ -2,15 +2,26 @@
 
 The encoding table and colour conversions come from ``rosbags-image`` (pure Python, OpenCV).
 It targets rosbags' own message classes and reads the data buffer as if rows were unpadded, so
-this module adds what it lacks: row padding (``step``), validation with clear errors, and
-normalisation of 16-bit images. Messages are read by field access only (``height``, ``width``,
-``encoding``, ``is_bigendian``, ``step``, ``data``; ``format`` and ``data`` for compressed), so
-rclpy messages and rosbags messages both work.
+this module adds what it lacks: row padding (``step``), validation with clear errors, and the
+mapping of deeper pixels to 8 bits. Messages are read by field access only (``height``,
+``width``, ``encoding``, ``is_bigendian``, ``step``, ``data``; ``format`` and ``data`` for
+compressed), so rclpy messages and rosbags messages both work.
 
-Supported raw encodings (``SUPPORTED_ENCODINGS``): mono8, mono16, 8UC1, 8UC3, 8UC4, 16UC1, bgr8,
-rgb8, bgra8, rgba8, bayer_rggb8/bggr8/gbrg8/grbg8, yuv422 (= uyvy), yuv422_yuy2 (= yuyv), and
-32FC1/64FC1 (float images: the finite pixels' range is stretched to 8 bits, NaN/inf become 0).
-Compressed: jpeg and png (what image_transport's compressed plugin sends), decoded by OpenCV.
+Raw encodings (:func:`is_supported_encoding`): every one ``rosbags-image`` converts.
+
+- Named: mono8/16, bgr8/16, rgb8/16, bgra8/16, rgba8/16, bayer_{rggb,bggr,gbrg,grbg}{8,16},
+  yuv422 (= uyvy), yuv422_yuy2 (= yuyv), nv12 and nv21 (4:2:0: ``height`` x ``width`` is the
+  image, even sizes; the data holds the Y plane then the interleaved chroma plane of half the
+  rows, both with row stride ``step``, so ``len(data) == step * height * 3 / 2``).
+- OpenCV types ``{8U,8S,16U,16S,32S,32F,64F}C{1,3,4}`` (``C1`` may be left out): one channel is
+  grey, three are BGR, four BGRA (the cv_bridge convention for 8UC3 / 8UC4).
+
+Pixels deeper than 8 bits (16-bit, signed, float) become 8 bits by one linear map: the range
+[min, max] of the finite pixels goes to 0..255, NaN and inf to 0. :func:`message_to_numpy` takes
+the range of the one image; :func:`pair_to_numpy` takes it over both images of a pair, so the
+two keep their relative brightness (a camera's auto exposure or one bright spot does not give
+the pair two contrasts). Compressed: jpeg and png (what image_transport's compressed plugin
+sends, 16-bit png included), decoded by OpenCV.
 
 Validation is split so a node can reject most bad messages cheaply on arrival:
 :func:`check_image` / :func:`check_compressed` look at fields and a few bytes only; what needs
@@ -26,39 +37,26 @@ from typing import Any
 import cv2
 import numpy as np
 from rosbags.image import ImageError
-from rosbags.image.image import convert_color, to_cvtype
+from rosbags.image.image import ENC_RE, ENCODINGMAP, convert_color, to_cvtype
 
-# Generic OpenCV-type encodings read as the named colour layout (the cv_bridge convention).
-_GENERIC_ALIASES = {"8UC1": "mono8", "8UC3": "bgr8", "8UC4": "bgra8", "16UC1": "mono16"}
+# Generic OpenCV-type encodings read as the named colour layout of their channel count (the
+# cv_bridge convention); other channel counts have no colour meaning and are rejected.
+_GENERIC_LAYOUT = {1: "mono", 3: "bgr", 4: "bgra"}
+# 4:2:0 encodings: chroma rows below the luma rows, half as many.
+_YUV420 = ("nv12", "nv21")
 
-SUPPORTED_ENCODINGS: tuple[str, ...] = (
-    "mono8",
-    "mono16",
-    "8UC1",
-    "8UC3",
-    "8UC4",
-    "16UC1",
-    "bgr8",
-    "rgb8",
-    "bgra8",
-    "rgba8",
-    "bayer_rggb8",
-    "bayer_bggr8",
-    "bayer_gbrg8",
-    "bayer_grbg8",
-    "yuv422",
-    "uyvy",
-    "yuv422_yuy2",
-    "yuyv",
-    "32FC1",
-    "64FC1",
-)
+NAMED_ENCODINGS: tuple[str, ...] = tuple(ENCODINGMAP)
+GENERIC_ENCODINGS: tuple[str, ...] = tuple(
+    f"{depth}C{n}" for depth in ("8U", "8S", "16U", "16S", "32S", "32F", "64F") for n in (1, 3, 4)
+) + tuple(f"{depth}" for depth in ("8U", "8S", "16U", "16S", "32S", "32F", "64F"))
+SUPPORTED_ENCODINGS: tuple[str, ...] = NAMED_ENCODINGS + GENERIC_ENCODINGS
 
 COLOR_SPACES = ("mono8", "bgr8")
 
 # Kinds of bad input, used as keys for error counting (diagnostics) and logging once per kind.
 ERROR_KINDS = (
     "zero_size",
+    "odd_size",
     "bad_step",
     "short_data",
     "long_data",
@@ -84,34 +82,53 @@ class ImageDecodeError(ValueError):
         self.kind = kind
 
 
-def _canonical(encoding: str) -> str:
-    return _GENERIC_ALIASES.get(encoding, encoding)
+def is_supported_encoding(encoding: str) -> bool:
+    """True for every raw encoding this module decodes (see the module docstring)."""
+    if encoding in ENCODINGMAP:
+        return True
+    match = ENC_RE.fullmatch(encoding)
+    return match is not None and int(match.group(2) or 1) in _GENERIC_LAYOUT
 
 
 def pixel_layout(encoding: str) -> tuple[np.dtype, int]:
-    """(dtype, channels per pixel) of a raw encoding; ImageDecodeError("unknown_encoding")."""
-    if encoding not in SUPPORTED_ENCODINGS:
+    """(dtype, channels per pixel) of a raw encoding; ImageDecodeError("unknown_encoding").
+
+    nv12 / nv21 count as one uint8 channel; their data has 1.5 rows per image row.
+    """
+    if not is_supported_encoding(encoding):
         raise ImageDecodeError(
             "unknown_encoding",
-            f"unsupported image encoding {encoding!r}; supported: {', '.join(SUPPORTED_ENCODINGS)}",
+            f"unsupported image encoding {encoding!r}; supported: the named encodings"
+            f" {', '.join(NAMED_ENCODINGS)} and OpenCV types like 8UC3, 16SC1, 32FC1"
+            " (1, 3 or 4 channels)",
         )
-    _, _, typestr, nchan = to_cvtype(_canonical(encoding))
+    _, _, typestr, nchan = to_cvtype(encoding)
     return np.dtype(typestr), int(nchan)
+
+
+def _data_rows(encoding: str, height: int) -> int:
+    """Rows of ``step`` bytes in the data of an image ``height`` rows tall."""
+    return height * 3 // 2 if encoding in _YUV420 else height
 
 
 def check_image(msg: Any) -> tuple[np.dtype, int]:
     """Validate a sensor_msgs/Image without touching its pixels; return (dtype, channels).
 
     Raises:
-        ImageDecodeError: zero width/height (``zero_size``), step smaller than a row
-            (``bad_step``), data shorter than step x height (``short_data``), data longer than
-            step x height (``long_data``: the size claim and the data disagree), or an
-            unsupported encoding (``unknown_encoding``).
+        ImageDecodeError: zero width/height (``zero_size``), odd width/height of a 4:2:0 image
+            (``odd_size``), step smaller than a row (``bad_step``), data shorter than
+            step x rows (``short_data``), data longer than step x rows (``long_data``: the size
+            claim and the data disagree), or an unsupported encoding (``unknown_encoding``).
+            Rows are the height, or 1.5 x the height for nv12 / nv21.
     """
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     dtype, nchan = pixel_layout(msg.encoding)
     if height <= 0 or width <= 0:
         raise ImageDecodeError("zero_size", f"image has zero size ({width}x{height})")
+    if msg.encoding in _YUV420 and (height % 2 or width % 2):
+        raise ImageDecodeError(
+            "odd_size", f"{msg.encoding} needs an even width and height, got {width}x{height}"
+        )
     row_bytes = width * nchan * dtype.itemsize
     if step < row_bytes:
         raise ImageDecodeError(
@@ -119,17 +136,15 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
             f"step {step} is smaller than a row of {width} px x {nchan * dtype.itemsize} B"
             f" = {row_bytes} B ({msg.encoding})",
         )
+    rows = _data_rows(msg.encoding, height)
     size = memoryview(msg.data).nbytes
-    if size < step * height:
-        raise ImageDecodeError(
-            "short_data",
-            f"data has {size} B, expected step x height = {step} x {height} = {step * height} B",
-        )
-    if size > step * height:
-        raise ImageDecodeError(
-            "long_data",
-            f"data has {size} B, more than step x height = {step} x {height} = {step * height} B",
-        )
+    what = f"step x rows = {step} x {rows} = {step * rows} B"
+    if msg.encoding in _YUV420:
+        what += f" ({msg.encoding}: 1.5 rows of data per image row)"
+    if size < step * rows:
+        raise ImageDecodeError("short_data", f"data has {size} B, expected {what}")
+    if size > step * rows:
+        raise ImageDecodeError("long_data", f"data has {size} B, more than {what}")
     return dtype, nchan
 
 
@@ -168,69 +183,142 @@ def check_compressed(msg: Any) -> None:
 def image_to_array(msg: Any) -> np.ndarray:
     """The pixels of a sensor_msgs/Image as stored: (H, W) or (H, W, C), native byte order.
 
-    Honours row padding (``step`` >= width x bytes per pixel) and ``is_bigendian``. The result
-    may be a view of ``msg.data`` (no copy) when no byte swap is needed.
+    nv12 / nv21 give the (1.5 H, W) uint8 planes (Y, then interleaved chroma) that OpenCV's
+    ``COLOR_YUV2*_NV12`` conversions read. Honours row padding (``step`` >= width x bytes per
+    pixel) and ``is_bigendian``. The result may be a view of ``msg.data`` (no copy) when no byte
+    swap is needed.
 
     Raises:
         ImageDecodeError: see :func:`check_image`.
     """
     dtype, nchan = check_image(msg)
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    rows = _data_rows(msg.encoding, height)
     row_bytes = width * nchan * dtype.itemsize
     data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
-    rows = data[: step * height].reshape(height, step)[:, :row_bytes]
+    packed = data[: step * rows].reshape(rows, step)[:, :row_bytes]
     order = ">" if msg.is_bigendian else "<"
-    pixels = rows.view(dtype.newbyteorder(order))
-    shape = (height, width) if nchan == 1 else (height, width, nchan)
+    pixels = packed.view(dtype.newbyteorder(order))
+    shape = (rows, width) if nchan == 1 else (rows, width, nchan)
     pixels = pixels.reshape(shape)
     if dtype.itemsize > 1 and (order == ">") != (sys.byteorder == "big"):
         pixels = pixels.astype(dtype)  # swap to native order
     return pixels
 
 
-def _to_mono8_or_bgr8(img: np.ndarray, encoding: str, color_space: str) -> np.ndarray:
+def _eight_bit_encoding(encoding: str, nchan: int) -> str:
+    """The 8-bit unsigned encoding with ``encoding``'s colour layout (bayer_rggb16 -> ...8)."""
+    if encoding in ENCODINGMAP:
+        return encoding[:-2] + "8" if encoding.endswith("16") else encoding
+    return _GENERIC_LAYOUT[nchan] + "8"
+
+
+def intensity_range(images: list[np.ndarray]) -> tuple[float, float] | None:
+    """[min, max] of the finite pixels over every image that is not uint8.
+
+    Args:
+        images: decoded pixel arrays (:func:`image_to_array`), any shape and dtype.
+
+    Returns:
+        (low, high) in the images' own units, or None when all images are uint8.
+
+    Raises:
+        ImageDecodeError("non_finite"): a float image without one finite pixel.
+    """
+    low, high = np.inf, -np.inf
+    for img in images:
+        if img.dtype == np.uint8:
+            continue
+        if img.dtype.kind == "f":
+            finite = np.isfinite(img)
+            if not finite.any():
+                raise ImageDecodeError(
+                    "non_finite", f"float image {img.shape[1::-1]} has no finite pixel"
+                )
+            values = img[finite] if not finite.all() else img
+        else:
+            values = img
+        low, high = min(low, float(values.min())), max(high, float(values.max()))
+    return None if low > high else (low, high)
+
+
+def to_uint8(img: np.ndarray, low: float, high: float) -> np.ndarray:
+    """Map pixel values linearly from [low, high] to 0..255 (rounded, clipped); NaN/inf -> 0.
+
+    Args:
+        img: (H, W) or (H, W, C) array of any numeric dtype.
+        low, high: the input range; high == low maps everything to 0.
+
+    Returns:
+        uint8 array of ``img``'s shape.
+    """
+    scale = 255.0 / (high - low) if high > low else 0.0
+    if img.dtype.kind != "f":
+        # saturating and rounding in one pass; values are raised to ``low`` first so that
+        # (v - low) * scale >= 0 and the absolute value convertScaleAbs takes changes nothing
+        floor = np.ceil(low)
+        if floor > np.iinfo(img.dtype).min:
+            img = np.maximum(img, img.dtype.type(min(floor, np.iinfo(img.dtype).max)))
+        return cv2.convertScaleAbs(img, alpha=scale, beta=-low * scale)
+    finite = np.isfinite(img)
+    out = np.zeros(img.shape, np.uint8)
+    values = img[finite].astype(np.float64)
+    out[finite] = np.clip(np.rint((values - low) * scale), 0, 255).astype(np.uint8)
+    return out
+
+
+def _convert(
+    img: np.ndarray, encoding: str, color_space: str, value_range: tuple[float, float] | None
+) -> np.ndarray:
+    """Decoded pixels of ``encoding`` -> mono8 / bgr8, deep pixels mapped by ``value_range``."""
     if color_space not in COLOR_SPACES:
         raise ValueError(f"color_space must be one of {COLOR_SPACES}, got {color_space!r}")
-    enc = _canonical(encoding)
-    if img.dtype.kind == "f":
-        img, enc = _float_to_mono8(img), "mono8"
-    if img.dtype == np.uint16:
-        # 16-bit cameras often use 10 or 12 bits: stretch the image's own range to 8 bits.
-        gray16 = img if img.ndim == 2 else None
-        if gray16 is not None:
-            img = cv2.normalize(gray16, None, 0, 255, cv2.NORM_MINMAX, dtype=cv2.CV_8U)
-            enc = "mono8"
+    nchan = 1 if img.ndim == 2 else img.shape[2]
+    if img.dtype != np.uint8:
+        if value_range is None:
+            value_range = intensity_range([img])
+        img = to_uint8(img, *value_range)
+    enc = _eight_bit_encoding(encoding, nchan)
     if not img.flags.c_contiguous:
         img = np.ascontiguousarray(img)
     try:
         return np.asarray(convert_color(img, enc, color_space))
-    except ImageError as err:  # pragma: no cover - every supported encoding converts
-        raise ImageDecodeError("unknown_encoding", str(err)) from err
+    except (ImageError, cv2.error) as err:  # pragma: no cover - every listed encoding converts
+        raise ImageDecodeError("unknown_encoding", f"{encoding}: {err}") from err
 
 
-def _float_to_mono8(img: np.ndarray) -> np.ndarray:
-    """(H, W) float image -> uint8: finite range stretched to 0..255, NaN/inf -> 0.
+def _decode_compressed(msg: Any, color_space: str) -> tuple[np.ndarray, str]:
+    """A CompressedImage -> (pixels, encoding of the pixels); 16-bit png keeps its depth."""
+    check_compressed(msg)
+    data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
+    flag = cv2.IMREAD_GRAYSCALE if color_space == "mono8" else cv2.IMREAD_COLOR
+    if "16" in str(msg.format) or "png" in str(msg.format).lower():
+        flag = cv2.IMREAD_UNCHANGED  # keep 16-bit png depth; mapped to 8 bits by the caller
+    img = cv2.imdecode(data, flag)
+    if img is None or img.size == 0:
+        raise ImageDecodeError(
+            "bad_compressed", f"cannot decode {data.size} B of compressed image ({msg.format!r})"
+        )
+    nchan = 1 if img.ndim == 2 else img.shape[2]
+    depth = "16" if img.dtype == np.uint16 else "8"
+    return img, {1: "mono", 3: "bgr", 4: "bgra"}[nchan] + depth
 
-    Raises ImageDecodeError("non_finite") when no pixel is finite.
-    """
-    finite = np.isfinite(img)
-    if not finite.any():
-        raise ImageDecodeError("non_finite", f"float image {img.shape[::-1]} has no finite pixel")
-    values = img[finite].astype(np.float64)
-    low, high = float(values.min()), float(values.max())
-    scale = 255.0 / (high - low) if high > low else 0.0
-    out = np.zeros(img.shape, np.uint8)
-    out[finite] = np.clip(np.rint((values - low) * scale), 0, 255).astype(np.uint8)
-    return out
+
+def _decode(msg: Any, color_space: str) -> tuple[np.ndarray, str]:
+    """Image or CompressedImage -> (pixels as stored or decoded, their encoding)."""
+    if is_compressed(msg):
+        return _decode_compressed(msg, color_space)
+    return image_to_array(msg), msg.encoding
 
 
 def image_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
     """A sensor_msgs/Image as mono8 (H, W) uint8 or bgr8 (H, W, 3) uint8.
 
-    Bayer images are demosaiced, YUV 4:2:2 converted, 16-bit images stretched to their range.
-    Raises ImageDecodeError for malformed messages (see :func:`image_to_array`).
+    Bayer images are demosaiced, YUV converted, deeper pixels mapped to 8 bits over the image's
+    own range (see the module docstring). Raises ImageDecodeError for malformed messages (see
+    :func:`image_to_array`).
     """
-    return _to_mono8_or_bgr8(image_to_array(msg), msg.encoding, color_space)
+    return _convert(image_to_array(msg), msg.encoding, color_space, None)
 
 
 def compressed_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
@@ -240,22 +328,8 @@ def compressed_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
         ImageDecodeError: see :func:`check_compressed`; data OpenCV cannot decode
             (``bad_compressed``).
     """
-    check_compressed(msg)
-    data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
-    flag = cv2.IMREAD_GRAYSCALE if color_space == "mono8" else cv2.IMREAD_COLOR
-    if "16" in str(msg.format) or "png" in str(msg.format).lower():
-        flag = cv2.IMREAD_UNCHANGED  # keep 16-bit png depth; normalised below
-    img = cv2.imdecode(data, flag)
-    if img is None or img.size == 0:
-        raise ImageDecodeError(
-            "bad_compressed", f"cannot decode {data.size} B of compressed image ({msg.format!r})"
-        )
-    if img.ndim == 2:
-        return _to_mono8_or_bgr8(img, "mono16" if img.dtype == np.uint16 else "mono8", color_space)
-    if img.dtype == np.uint16:
-        img = cv2.convertScaleAbs(img, alpha=255.0 / 65535.0)
-    encoding = "bgra8" if img.shape[2] == 4 else "bgr8"
-    return _to_mono8_or_bgr8(img, encoding, color_space)
+    img, encoding = _decode_compressed(msg, color_space)
+    return _convert(img, encoding, color_space, None)
 
 
 def is_compressed(msg: Any) -> bool:
@@ -264,10 +338,35 @@ def is_compressed(msg: Any) -> bool:
 
 
 def message_to_numpy(msg: Any, color_space: str = "mono8") -> np.ndarray:
-    """Image or CompressedImage -> mono8 (H, W) or bgr8 (H, W, 3) uint8. See the two above."""
-    if is_compressed(msg):
-        return compressed_to_numpy(msg, color_space)
-    return image_to_numpy(msg, color_space)
+    """Image or CompressedImage -> mono8 (H, W) or bgr8 (H, W, 3) uint8. See the two above.
+
+    For the two images of a pair use :func:`pair_to_numpy`, which maps both with one range.
+    """
+    img, encoding = _decode(msg, color_space)
+    return _convert(img, encoding, color_space, None)
+
+
+def pair_to_numpy(
+    msg_a: Any, msg_b: Any, color_space: str = "mono8"
+) -> tuple[np.ndarray, np.ndarray]:
+    """The two images of a pair as mono8 (H, W) or bgr8 (H, W, 3) uint8, with one contrast.
+
+    Like :func:`message_to_numpy` on each, except that pixels deeper than 8 bits (16-bit,
+    signed, float) are mapped to 8 bits with one range, [min, max] of the finite pixels of
+    both images: two exposures of one scene keep their relative brightness, so a feature's
+    two appearances differ as the scene does, not by two independent stretches.
+
+    Raises:
+        ImageDecodeError: either message is malformed (see :func:`check_image`,
+            :func:`check_compressed`).
+    """
+    img_a, enc_a = _decode(msg_a, color_space)
+    img_b, enc_b = _decode(msg_b, color_space)
+    value_range = intensity_range([img_a, img_b])
+    return (
+        _convert(img_a, enc_a, color_space, value_range),
+        _convert(img_b, enc_b, color_space, value_range),
+    )
 
 
 def numpy_to_image(array: np.ndarray, encoding: str, header: Any = None) -> Any:
@@ -283,10 +382,7 @@ def numpy_to_image(array: np.ndarray, encoding: str, header: Any = None) -> Any:
     array = np.ascontiguousarray(array)
     if array.ndim not in (2, 3) or array.shape[0] == 0 or array.shape[1] == 0:
         raise ValueError(f"expected a non-empty (H, W) or (H, W, C) array, got {array.shape}")
-    if encoding in ("64FC1", "32FC1"):
-        dtype, nchan = np.dtype(np.float64 if encoding == "64FC1" else np.float32), 1
-    else:
-        dtype, nchan = pixel_layout(encoding)
+    dtype, nchan = pixel_layout(encoding)
     channels = 1 if array.ndim == 2 else array.shape[2]
     if array.dtype != dtype or channels != nchan:
         raise ValueError(

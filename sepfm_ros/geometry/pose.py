@@ -125,11 +125,14 @@ def refine_pose(
     K_b: np.ndarray,
     scale_px: float = 1.0,
     max_iterations: int = 20,
+    fix_translation: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Minimise the Sampson error (px, soft-L1 beyond ``scale_px``) over R (3 dof) and t (2 dof).
 
     Args:
         R, t: starting pose; pts_a, pts_b: (N, 2) pixel matches (N >= 5); K_a, K_b: intrinsics.
+        fix_translation: keep t's direction and fit R only (3 dof): the calibration check's
+            rotation, which a forward translation cannot absorb.
     Returns:
         (R (3, 3), t (3,) unit).
     """
@@ -143,14 +146,21 @@ def refine_pose(
 
     def unpack(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         Rp = Rotation.from_rotvec(p[:3]).as_matrix() @ R
+        if fix_translation:
+            return Rp, t0
         tp = t0 + basis @ p[3:]
         return Rp, tp / np.linalg.norm(tp)
 
     def fun(p: np.ndarray) -> np.ndarray:
         return _sampson_residuals(*unpack(p), xa, xb, Ka_inv, Kb_inv)
 
+    n_params = 3 if fix_translation else 5
     sol = least_squares(
-        fun, np.zeros(5), loss="soft_l1", f_scale=scale_px, max_nfev=max_iterations * 6
+        fun,
+        np.zeros(n_params),
+        loss="soft_l1",
+        f_scale=scale_px,
+        max_nfev=max_iterations * (n_params + 1),
     )
     return unpack(sol.x)
 

@@ -11,6 +11,33 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True)
+def trial_count(k: int, inlier_ratio: float, confidence: float) -> float:
+    """The paper's F(k, r) at r = 1 - ``inlier_ratio``, uncapped (inf when no sample of k can be
+    all inliers); the one implementation behind :func:`ransac_trials`, the RANSAC loop and the
+    compiled stage 1.
+
+    F(k, r) = ceil(log(1 - p) / log(1 - (1 - r)^k)), at least 1; p is ``confidence``.
+    """
+    w = inlier_ratio**k
+    if w >= 1.0:
+        return 1.0
+    if w <= 0.0:
+        return np.inf
+    denom = np.log1p(-w)
+    if denom == 0.0:
+        return np.inf
+    return max(1.0, np.ceil(np.log1p(-confidence) / denom))
+
+
+@numba.njit(cache=True, nogil=True)
+def trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
+    """F(k, r) for the inlier ratio ``count`` / ``n`` of the best model so far, capped at ``cap``
+    (``cap`` before any inlier is known)."""
+    w = min(1.0, count / n) if n > 0 else 0.0
+    return int(min(trial_count(k, w, confidence), float(cap)))
+
+
 def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | None = None) -> int:
     """The paper's F(k, r): RANSAC trials needed to draw one all-inlier sample of size k.
 
@@ -30,14 +57,7 @@ def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | 
         raise ValueError(f"outlier rate r must be in [0, 1], got {r}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    w = (1.0 - r) ** k
-    if w >= 1.0:
-        n = 1
-    elif w <= 0.0:
-        n = math.inf
-    else:
-        denom = math.log1p(-w)
-        n = math.inf if denom == 0.0 else math.ceil(math.log1p(-confidence) / denom)
+    n = trial_count(int(k), 1.0 - r, float(confidence))
     if max_trials is not None:
         n = min(n, max_trials)
     if n == math.inf:
@@ -126,13 +146,6 @@ def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> 
     if P < k:
         raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
     return pool[_floyd_samples(rng.random((b, k)), P)]
-
-
-def _trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
-    w = min(1.0, count / n) if n > 0 else 0.0
-    if w <= 0.0:
-        return cap
-    return ransac_trials(k, 1.0 - w, confidence, max_trials=cap)
 
 
 def run_ransac(
@@ -247,7 +260,7 @@ def run_ransac(
         pace = max(1, max(samples[a] for a in active))
         for a in list(active):
             arm = pool[a]
-            need = _trials_needed(
+            need = trials_needed(
                 arm.sample_size, max(best_count, 0), arm.n, confidence, max_samples
             )
             need = max(need, min_samples)
@@ -294,7 +307,7 @@ def run_ransac(
         # adaptive stopping on the samples of the arms that agree with the best model
         if leader >= 0:
             arm = pool[leader]
-            need = _trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
+            need = trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
             if pooled_samples() >= max(need, min_samples):
                 converged = True
                 break

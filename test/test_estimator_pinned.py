@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sepfm_ros.geometry import estimate_fundamental
+from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.synthetic import make_pair
 
 # (method, scene seed, lines, options, F, inliers, hypotheses, stage-1 hypotheses, fallback, status)
@@ -165,6 +165,53 @@ def test_estimate_is_pinned(case):
     assert est.hypotheses == hyp
     assert est.stage1_hypotheses == hyp1
     assert est.fallback == fallback
+
+
+def test_options_object_and_keywords_give_the_same_estimate():
+    sp = make_pair(n_inliers=120, n_outliers=100, n_lines=3, noise=0.5, seed=13)
+    kw = {"triple": "synthesized", "hough_width": 384, "refine": False}
+    a = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, threshold=1.5, seed=113, **kw)
+    b = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, threshold=1.5, seed=113, options=EstimatorOptions(**kw)
+    )
+    # keywords override the object's fields
+    c = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, threshold=1.5, seed=113,
+        options=EstimatorOptions(hough_width=640, refine=True), triple="synthesized",
+        hough_width=384, refine=False,
+    )  # fmt: skip
+    assert np.array_equal(a.F, b.F) and np.array_equal(a.F, c.F)
+    assert a.hypotheses == b.hypotheses == c.hypotheses
+
+
+@pytest.mark.parametrize(
+    "bad, message",
+    [
+        ({"max_samples": 0}, "max_samples must be >= 1"),
+        ({"max_line_pairs": 0}, "max_line_pairs must be >= 1"),
+        ({"min_line_inliers": 2}, "min_line_inliers must be >= 3"),
+        ({"line_threshold": -1.0}, "line_threshold must be positive"),
+        ({"line_distance": float("nan")}, "line_distance must be finite"),
+        ({"hough_width": "wide"}, "hough_width must be int"),
+        ({"triple": "some"}, "triple must be one of"),
+    ],
+)
+def test_bad_options_raise_clear_errors(bad, message):
+    with pytest.raises(ValueError, match=message):
+        EstimatorOptions(**bad)
+    sp = make_pair(n_inliers=40, n_outliers=0, n_lines=2, noise=0.0, seed=1)
+    with pytest.raises(ValueError, match=message):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, **bad)
+    with pytest.raises(ValueError, match="unknown options"):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, max_sample=10)
+
+
+def test_options_are_converted_and_frozen():
+    o = EstimatorOptions(max_samples=300.0, refine=0, line_threshold=1)
+    assert (o.max_samples, o.refine, o.line_threshold) == (300, False, 1.0)
+    assert type(o.max_samples) is int and type(o.line_threshold) is float
+    with pytest.raises(AttributeError):
+        o.max_samples = 5  # type: ignore[misc]
 
 
 if __name__ == "__main__":  # re-record after a deliberate algorithmic change

@@ -6,7 +6,11 @@ methods run in the same process on the same matches at equal threshold (1 px) an
 the GT F), median GT-inlier error, success rate (median GT-inlier error < 1 px and >= 20 GT
 inliers recovered), hypotheses, and median ms per pair; then the ratios the targets are stated in.
 
-    python benchmarks/bench_estimators.py [--step 1] [--seeds 0] [--out benchmarks/results]
+    python benchmarks/bench_estimators.py [--step 1] [--seeds 0] [--ratios 0.75,0.95]
+        [--out FILE.md] [--write-docs [--readme README.md]]
+
+``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py),
+including the headline table that README shows.
 
 Figures are measured on this machine in this run; nothing is asserted.
 """
@@ -14,11 +18,11 @@ Figures are measured on this machine in this run; nothing is asserted.
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
 
+import bench_docs
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
@@ -105,6 +109,25 @@ def report(ratio: float, rows: dict) -> str:
     return "\n".join(out)
 
 
+def headline(settings: dict[float, dict]) -> str:
+    """README's headline table: F-score and median ms per pair of our methods, OpenCV's and
+    PoseLib's, one column pair per SIFT ratio setting."""
+    names = [m for m in ("sep5", "sep4", "ransac7", "cv-ransac", "cv-magsac", "cv-accurate",
+                         "poselib") if m in METHODS]  # fmt: skip
+    head = "| method | " + " | ".join(
+        f"F-score (SIFT {r}) | ms per pair (SIFT {r})" for r in settings
+    )
+    out = [head + " |", "|---" * (1 + 2 * len(settings)) + "|"]
+    for name in names:
+        cells = []
+        for rows in settings.values():
+            rs = rows[name]
+            f_score, ms = np.mean([r["f"] for r in rs]), np.median([r["ms"] for r in rs])
+            cells += [f"{f_score:.3f}", f"{ms:.1f}"]
+        out.append(f"| {name} | " + " | ".join(cells) + " |")
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--step", type=int, default=1, help="use every STEP-th pair")
@@ -112,10 +135,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--ratios", default="0.75,0.95")
     ap.add_argument("--out", type=Path, default=None, help="also write the report here (.md)")
     ap.add_argument(
+        "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
+    )
+    ap.add_argument(
         "--readme",
         type=Path,
         default=None,
-        help="replace the text between <!-- bench-estimators:start/end --> in this file",
+        help="with --write-docs: also copy the headline table into this README's "
+        "<!-- headline:begin/end --> markers",
     )
     a = ap.parse_args(argv)
     if not (DATA / "pairs.json").is_file():
@@ -124,25 +151,27 @@ def main(argv: list[str] | None = None) -> int:
     pairs, errors = load_manifest(DATA / "pairs.json")
     pairs = pairs[:: a.step]
     seeds = [int(s) for s in a.seeds.split(",")]
-    text = [f"## Estimator benchmark ({len(pairs)} pairs, seeds {seeds}, threshold 1 px, "
-            "confidence 0.99)", ""]  # fmt: skip
-    for ratio in (float(r) for r in a.ratios.split(",")):
-        text.append(report(ratio, run_setting(pairs, ratio, seeds)))
-    print("\n".join(text))
+    title = (
+        f"Estimator benchmark ({len(pairs)} pairs, seeds {seeds}, threshold 1 px, confidence 0.99)"
+    )
+    settings = {float(r): run_setting(pairs, float(r), seeds) for r in a.ratios.split(",")}
+    text = [report(ratio, rows) for ratio, rows in settings.items()]
+    print("\n".join([f"## {title}", "", *text]))
     if a.out:
         a.out.parent.mkdir(parents=True, exist_ok=True)
-        a.out.write_text("\n".join(text) + "\n")
-    if a.readme:
-        start, end = "<!-- bench-estimators:start -->", "<!-- bench-estimators:end -->"
-        doc = a.readme.read_text()
-        if start not in doc or end not in doc:
-            print(f"{a.readme} has no {start} ... {end} markers", file=sys.stderr)
-            return 2
-        load = os.getloadavg()[0]
-        body = "\n".join(text).replace("## Estimator benchmark", "Estimator benchmark", 1)
-        body += f"\n(load average at the end of the run: {load:.1f} on {os.cpu_count()} cores)\n"
-        head, rest = doc.split(start, 1)
-        a.readme.write_text(head + start + "\n" + body + "\n" + end + rest.split(end, 1)[1])
+        a.out.write_text("\n".join([f"## {title}", "", *text]) + "\n")
+    if a.write_docs:
+        begin, end = bench_docs.markers(bench_docs.HEADLINE)
+        body = "\n".join(["Headline (README):", "", begin, headline(settings), end, "", *text])
+        command = bench_docs.command_line("bench_estimators.py", argv)
+        path = bench_docs.write_section(
+            "bench_estimators", bench_docs.section("bench_estimators", title, command, body)
+        )
+        print(f"wrote {path}", file=sys.stderr)
+        if a.readme:
+            problem = bench_docs.update_headline(a.readme, path)
+            if problem:
+                print(f"headline not updated: {problem}", file=sys.stderr)
     return 0
 
 

@@ -1,11 +1,17 @@
 """Benchmark of the live node against the same pipeline without ROS.
 
     python benchmarks/bench_node.py [--seconds 10] [--rate 30] [--features orb]
+<<<<<<< HEAD
         [--max-features 1000] [--method sep5] [--scenes NAME ...]
         [--publisher-qos default sensor_data]
 
 The node runs at its default settings (no QoS override), fed by a publisher with the QoS a camera
 driver uses: ROS 2's default (reliable) or sensor-data (best effort), one node per QoS.
+=======
+        [--max-features 1000] [--method sep5] [--scenes NAME ...] [--write-docs]
+
+``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
+>>>>>>> h-hygiene
 
 For each scene it prints (templeRing 640x480 in motion mode: the 47 views of the ring as one
 image stream, F between consecutive views, each frame detected once; KITTI stereo 1241x376:
@@ -45,6 +51,7 @@ import time
 from collections import defaultdict
 from pathlib import Path
 
+import bench_docs
 import cv2
 import numpy as np
 
@@ -392,7 +399,7 @@ def _grey(image: np.ndarray) -> np.ndarray:
     return cv2.cvtColor(image, cv2.COLOR_BGR2GRAY)
 
 
-def main() -> int:
+def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=30.0, help="paced input rate, pairs/s")
@@ -414,11 +421,30 @@ def main() -> int:
         choices=PUBLISHER_QOS,
         help="QoS of the feeding publisher (the node keeps its default settings)",
     )
-    args = parser.parse_args()
+    parser.add_argument(
+        "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
+    )
+    args = parser.parse_args(argv)
     if not DATA.is_dir():
         print(f"shared data not found at {DATA}", file=sys.stderr)
         return 2
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+    with bench_docs.captured_stdout() as out:
+        run_scenes(args)
+    if args.write_docs:
+        title = f"Node benchmark ({args.method}, {args.features} {args.max_features})"
+        command = bench_docs.command_line("bench_node.py", argv)
+        body = f"```text\n{out.text.strip()}\n```"
+        path = bench_docs.write_section(
+            "bench_node", bench_docs.section("bench_node", title, command, body)
+        )
+        print(f"wrote {path}", file=sys.stderr)
+    return 0
+
+
+def run_scenes(args: argparse.Namespace) -> None:
+    """Pipeline and node figures of every scene in ``args.scenes``, printed."""
     print(
         f"method {args.method}, features {args.features}, max_features {args.max_features},"
         f" {' '.join(args.param)} {os.cpu_count()} CPUs, load average"
@@ -446,7 +472,6 @@ def main() -> int:
         for publisher_qos in args.publisher_qos:
             bench_node(mode, images, args, publisher_qos)
         print(f"  (load average now {os.getloadavg()[0]:.1f})")
-    return 0
 
 
 if __name__ == "__main__":

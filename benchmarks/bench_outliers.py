@@ -7,7 +7,9 @@ each target. Printed per target: success (median GT-inlier error < 1 px), F-scor
 inliers, and hypotheses of sep4 / sep5 / ransac7 / ransac8 (median and the median per-pair ratio
 sep4 / ransac7 over the runs where a line pair was used).
 
-    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8]
+    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--write-docs]
+
+``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
 """
 
 from __future__ import annotations
@@ -17,6 +19,7 @@ import sys
 import time
 from pathlib import Path
 
+import bench_docs
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
@@ -48,6 +51,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=int, default=4)
     ap.add_argument("--rates", default="0.5,0.65,0.8")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
+    )
     a = ap.parse_args(argv)
     if not (DATA / "pairs.json").is_file():
         print(f"shared data not found at {DATA}", file=sys.stderr)
@@ -55,8 +61,8 @@ def main(argv: list[str] | None = None) -> int:
     pairs, _ = load_manifest(DATA / "pairs.json")
     pairs = pairs[:: a.step]
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", 0.8))
-    lines = [f"## Outlier-rate benchmark ({len(pairs)} pairs, SIFT 0.8 + random wrong matches)", ""]
-    lines += ["| outlier rate | method | success % | F-score | hypotheses (median) | ms (median) |",
+    title = f"Outlier-rate benchmark ({len(pairs)} pairs, SIFT 0.8 + random wrong matches)"
+    lines = ["| outlier rate | method | success % | F-score | hypotheses (median) | ms (median) |",
               "|---|---|---|---|---|---|"]  # fmt: skip
     notes = []
     t0 = time.time()
@@ -92,7 +98,14 @@ def main(argv: list[str] | None = None) -> int:
             f"- outlier rate {rate:.2f}: sep4 / ransac7 hypotheses, median per-pair ratio over "
             f"the {int(used.sum())} runs with a line pair: {ratio:.2f}"
         )
-    print("\n".join(lines + [""] + notes))
+    body = "\n".join(lines + [""] + notes)
+    print(f"## {title}\n\n{body}")
+    if a.write_docs:
+        command = bench_docs.command_line("bench_outliers.py", argv)
+        path = bench_docs.write_section(
+            "bench_outliers", bench_docs.section("bench_outliers", title, command, body)
+        )
+        print(f"wrote {path}", file=sys.stderr)
     return 0
 
 

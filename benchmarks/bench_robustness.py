@@ -1,16 +1,16 @@
-"""Robustness report (issue 6): runs the robustness tests and writes their figures as Markdown.
+"""Robustness report: runs the robustness tests and writes their figures as Markdown.
 
     python benchmarks/bench_robustness.py [--fuzz-raw 10000] [--fuzz-compressed 3000]
-        [--overload-s 60] [--overload-runs 1] [--kill-trials 20] [--out docs/robustness.md]
+        [--overload-s 60] [--overload-runs 1] [--kill-trials 20] [--out FILE.md] [--write-docs]
 
-The default sizes are the issue's and the same as the default test run (CI runs these tests in
+The default sizes are the same as the default test run (CI runs these tests in
 full: test/test_robustness_live.py, test/test_robustness_bags.py, test/test_degeneracy.py);
 larger values make longer soak runs. The tests print each figure as ``[robustness] ...`` and,
 through the environment variable SEPFM_ROBUSTNESS_REPORT, hand them to this script, which writes
-the report (default docs/robustness.md) and prints it. Exit code: pytest's (non-zero when a pass
-criterion failed; the report is written anyway).
+the report, prints it and with ``--write-docs`` puts it in docs/benchmarks.md (bench_docs.py).
+Exit code: pytest's (non-zero when a pass criterion failed; the report is written anyway).
 
-Issue 6's overload bound (end-to-end latency p95 under twice the unloaded p95) is a timing figure:
+The overload bound (end-to-end latency p95 under twice the unloaded p95) is a timing figure:
 the test asserts only that latency stays bounded (3x: no queue), and this report checks the 2x
 bound. ``--overload-runs N`` repeats the overload test N - 1 more times after the full run and
 tabulates every run against the bound (one 60 s run says little on a shared 2-core machine).
@@ -21,12 +21,13 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import platform
 import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
+
+import bench_docs
 
 REPO = Path(__file__).resolve().parent.parent
 TESTS = ["test/test_robustness_live.py", "test/test_robustness_bags.py", "test/test_degeneracy.py"]
@@ -52,11 +53,11 @@ def _value(v) -> str:
 
 
 def render(figures: dict, header: str) -> str:
-    lines = ["# Robustness report", "", header, ""]
+    lines = [header, ""]
     for section in [*TITLES, *sorted(set(figures) - set(TITLES))]:
         if section not in figures:
             continue
-        lines += [f"## {TITLES.get(section, section)}", "", "| figure | value |", "|---|---|"]
+        lines += [f"### {TITLES.get(section, section)}", "", "| figure | value |", "|---|---|"]
         for key, value in figures[section].items():
             lines.append(f"| {key} | {_value(value).replace('|', '/')} |")
         lines.append("")
@@ -69,7 +70,7 @@ OVERLOAD_BOUND = 2.0  # issue 6: loaded p95 < 2 x unloaded p95
 def overload_table(runs: list[dict]) -> str:
     """Markdown table of repeated overload runs against the 2x bound."""
     lines = [
-        "## Overload: repeated runs against the 2x latency bound",
+        "### Overload: repeated runs against the 2x latency bound",
         "",
         "| run | load (1 min) | processing rate Hz | p95 unloaded ms | p95 loaded ms | ratio "
         "| node-side ratio | p95 at half rate ms | ratio to it | recovery answered | within 2x |",
@@ -118,7 +119,10 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--overload-s", type=float, default=60.0)
     p.add_argument("--overload-runs", type=int, default=1, help="overload test runs in all")
     p.add_argument("--kill-trials", type=int, default=20)
-    p.add_argument("--out", type=Path, default=REPO / "docs" / "robustness.md")
+    p.add_argument("--out", type=Path, default=None, help="also write the report to this file")
+    p.add_argument(
+        "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
+    )
     args = p.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
         report = Path(tmp) / "figures.json"
@@ -153,27 +157,28 @@ def main(argv: list[str] | None = None) -> int:
     if plane:
         figures["dominant_plane_check"] = {f"scene {k + 1}": t for k, t in enumerate(plane)}
     summary = res.stdout.strip().splitlines()[-1] if res.stdout.strip() else "no output"
-    commit = subprocess.run(
-        ["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True
-    ).stdout.strip()
-    header = (
-        f"Produced by `python benchmarks/bench_robustness.py` at commit {commit or '?'} "
-        f"on {platform.node()} "
-        f"({os.cpu_count()} CPUs) in {elapsed:.0f} s, load average (1 min) {load_before:.2f} "
-        f"before and {os.getloadavg()[0]:.2f} after; pytest: {summary}. "
+    details = (
+        f"Ran {elapsed:.0f} s, load average (1 min) {load_before:.2f} before; pytest: {summary}. "
         "Sizes: "
         f"{args.fuzz_raw} + {args.fuzz_compressed} malformed messages, {args.overload_s:g} s "
         f"overload, {args.kill_trials} SIGKILL trials. Memory is the node process's resident set "
         "size (VmRSS); latency is end to end (pair published by the test -> ~/estimate_info "
         "received)."
     )
-    text = render(figures, header)
+    command = bench_docs.command_line("bench_robustness.py", argv)
+    text = render(figures, details)
     if overload_runs:
         text += "\n" + overload_table(overload_runs)
-    args.out.parent.mkdir(parents=True, exist_ok=True)
-    args.out.write_text(text + "\n")
     print(text)
-    print(f"\nwrote {args.out}", file=sys.stderr)
+    if args.out:
+        args.out.parent.mkdir(parents=True, exist_ok=True)
+        header = f"Produced by `{command}` on {bench_docs.machine_description()}.\n\n"
+        args.out.write_text(header + text + "\n")
+        print(f"\nwrote {args.out}", file=sys.stderr)
+    if args.write_docs:
+        section = bench_docs.section("bench_robustness", "Robustness", command, text)
+        path = bench_docs.write_section("bench_robustness", section)
+        print(f"\nwrote {path}", file=sys.stderr)
     return returncode
 
 

@@ -1,12 +1,25 @@
-"""Shared test fixtures.
+"""Shared test fixtures, session environment and markers.
+
+Session environment (set before any test runs, so node subprocesses and the test process's own
+rclpy share it):
+
+- ``ROS_DOMAIN_ID``: one random domain (1..200) per test session, so parallel runs on one
+  machine do not see each other.
+- ``ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`` (unless set): DDS discovery stays on this machine.
+
+Fixtures:
 
 - ``shared_data``: the folder ``../shared/data`` beside the repository (real images with GT F).
   Skips when it is missing, unless ``SEPFM_REQUIRE_SHARED=1`` (CI), where it fails instead.
 - ``compiled_kernels`` (autouse): the estimator's numba kernels compiled (or loaded from the
   on-disk cache) once, before any test, so node subprocesses started by tests load a warm cache
   instead of each compiling for tens of seconds.
-- ``ros_domain_id``: one random ROS_DOMAIN_ID (1..200) per test session, set in ``os.environ``
-  so node subprocesses and the test process's own rclpy share it and no other run.
+- ``ros_domain_id``: the session's ROS_DOMAIN_ID; live tests (real DDS) request it.
+
+Markers (registered in pyproject.toml): ``ros`` (real DDS) and ``shared_data`` are applied here
+to every test that uses the fixture of that name; ``slow`` and ``timing`` are set in the test
+modules, or below in ``MODULE_MARKS`` for whole modules. ``python -m pytest`` runs everything
+(what CI runs); ``python -m pytest -m "not slow"`` is the fast run while developing.
 """
 
 from __future__ import annotations
@@ -19,6 +32,36 @@ import pytest
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
+
+# whole modules that are slow (more than about half a minute on a 2-core machine) or whose
+# assertions bound latency or throughput (``timing``: may fail on a heavily loaded machine)
+MODULE_MARKS: dict[str, tuple[str, ...]] = {
+    "test_node_live": ("slow", "timing"),
+    "test_robustness_live": ("slow", "timing"),
+    "test_robustness_bags": ("slow",),
+    "test_bags_replay": ("slow",),
+    "test_colcon_run": ("slow",),
+    "test_geometry_real": ("slow",),
+    "test_evaluation_bags": ("slow",),
+}
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Session environment: a random ROS_DOMAIN_ID and localhost-only DDS discovery."""
+    os.environ["ROS_DOMAIN_ID"] = str(random.SystemRandom().randint(1, 200))
+    os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    for item in items:
+        names = getattr(item, "fixturenames", ())
+        if "ros_domain_id" in names:
+            item.add_marker(pytest.mark.ros)
+        if "shared_data" in names:
+            item.add_marker(pytest.mark.shared_data)
+        module = getattr(getattr(item, "module", None), "__name__", "").rsplit(".", 1)[-1]
+        for mark in MODULE_MARKS.get(module, ()):
+            item.add_marker(getattr(pytest.mark, mark))
 
 
 @pytest.fixture(scope="session")
@@ -42,7 +85,5 @@ def compiled_kernels() -> float:
 
 @pytest.fixture(scope="session")
 def ros_domain_id() -> int:
-    """A random ROS_DOMAIN_ID for this test session, exported before anyone calls rclpy.init."""
-    domain = random.SystemRandom().randint(1, 200)
-    os.environ["ROS_DOMAIN_ID"] = str(domain)
-    return domain
+    """The session's ROS_DOMAIN_ID (set in ``pytest_configure``, before any rclpy.init)."""
+    return int(os.environ["ROS_DOMAIN_ID"])

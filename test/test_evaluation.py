@@ -10,10 +10,12 @@ from __future__ import annotations
 import csv
 import json
 import math
+import re
 import shutil
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -310,10 +312,20 @@ def test_ctrl_c_keeps_a_partial_report_of_whole_pairs(tmp_path):
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     first = proc.stderr.readline()  # printed once the pairs are loaded, before the runs start
     assert "40 pairs x" in first, first
-    time.sleep(3.0)  # the whole run takes far longer
-    assert proc.poll() is None, "finished before it could be interrupted"
+    # interrupt once the progress bar shows at least one whole pair of runs (of 40)
+    per_pair_runs = len(available_methods()) * 3
+    stderr: list[str] = []
+    reader = threading.Thread(target=lambda: stderr.extend(iter(lambda: proc.stderr.read(1), "")))
+    reader.start()
+    deadline = time.monotonic() + 300
+    while max(map(int, re.findall(r"(\d+)/\d+ \[", "".join(stderr))), default=0) < per_pair_runs:
+        assert proc.poll() is None, "finished before it could be interrupted"
+        assert time.monotonic() < deadline, "no pair finished within 300 s"
+        time.sleep(0.05)
     proc.send_signal(signal.SIGINT)
-    _, err = proc.communicate(timeout=120)
+    proc.wait(timeout=120)
+    reader.join(timeout=10)
+    err = "".join(stderr)
     assert proc.returncode == 130, err
     assert "interrupted; partial report" in err
     report = (out / "report.md").read_text()

@@ -21,6 +21,7 @@ from sepfm_ros.geometry.line_pairs import (
     rank_line_pairs,
     working_scale,
 )
+from sepfm_ros.geometry.ransac import run_ransac, trials_needed
 from sepfm_ros.geometry.solvers.line_homography import (
     line_homography_3pt,
     line_homography_3pt_kernel,
@@ -201,3 +202,65 @@ def test_control_points_are_the_farthest_border_intersections():
         ctrl = control_points(line, size)
         assert np.allclose(ctrl, _control_points_reference(line, size))
         assert np.allclose(ctrl @ line[:2] + line[2], 0.0, atol=1e-6)  # both on the line
+
+
+class _LineHomographyProblem:
+    """Stage 1 written as a :class:`sepfm_ros.geometry.ransac.Problem` for the generic loop."""
+
+    sample_size = 3
+
+    def __init__(self, t1, t2, len1, len2, threshold):
+        self.t1, self.t2, self.len1, self.len2, self.threshold = t1, t2, len1, len2, threshold
+        self.n = len(t1)
+        self.pool = np.arange(self.n)
+
+    def _errors(self, h):
+        err = np.empty(self.n)
+        transfer_errors(h, self.t1, self.t2, self.len1, self.len2, err)
+        return err
+
+    def solve(self, samples):
+        models, index = [], []
+        for i, s in enumerate(samples):
+            h = np.empty(4)
+            line_homography_3pt_kernel(self.t1[s], self.t2[s], h)
+            if abs(h[0] * h[3] - h[1] * h[2]) > 1e-9:
+                models.append(h)
+                index.append(i)
+        return np.array(models).reshape(-1, 4), np.array(index, dtype=int)
+
+    def score(self, models):
+        err = np.array([self._errors(h) for h in models])
+        cost = np.minimum(err * err, self.threshold**2).sum(axis=1)
+        return cost, (err < self.threshold).sum(axis=1)
+
+    def local_optimize(self, model):
+        inl = self._errors(model) < self.threshold
+        if np.count_nonzero(inl) < 4:
+            return np.empty((0, 4))
+        return line_homography_lsq_kernel(self.t1, self.t2, inl)[None]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_compiled_stage1_agrees_with_the_generic_ransac_loop(seed):
+    """Parity of the compiled twin with ``run_ransac``: the same inliers and H_e on noisy line
+    correspondences with outliers, and both stop at F(3, r) of the inlier ratio they found."""
+    rng = np.random.default_rng(100 + seed)
+    H = np.eye(2) + 0.3 * rng.normal(size=(2, 2))  # a line homography near the identity
+    t1 = rng.uniform(0, 1, 60)
+    t2 = transfer(H, t1) + rng.normal(0, 2e-4, 60)  # 0.08 px at 400 px per unit of t
+    wrong = rng.random(60) < 0.3
+    t2[wrong] = rng.uniform(0, 1, wrong.sum())
+    h, found, hyps = stage1_ransac(t1, t2, 400.0, 400.0, 0.5, 0.99, rng.random((200, 3)))
+    problem = _LineHomographyProblem(t1, t2, 400.0, 400.0, 0.5)
+    ref = run_ransac([problem], np.random.default_rng(seed), 0.99, max_samples=200)
+    assert found and ref.model is not None and ref.converged
+    inl, inl_ref = problem._errors(h) < 0.5, problem._errors(ref.model) < 0.5
+    for mask in (inl, inl_ref):  # both keep the true correspondences and reject the wrong ones
+        assert np.count_nonzero(~mask & ~wrong) <= 1 and np.count_nonzero(mask & wrong) <= 2
+    grid = np.linspace(0, 1, 11)
+    assert np.allclose(transfer(h.reshape(2, 2), grid), transfer(ref.model.reshape(2, 2), grid),
+                       atol=2e-3)  # fmt: skip
+    need = trials_needed(3, int(np.count_nonzero(inl)), 60, 0.99, 200)
+    assert need <= hyps and need <= sum(ref.samples)
+    assert hyps <= 2 * need + 70 and sum(ref.samples) <= 2 * need + 70

@@ -5,12 +5,16 @@ from __future__ import annotations
 
 import ctypes.util
 import platform
+import subprocess
+import sys
 import xml.etree.ElementTree as ET
+from pathlib import Path
 
 import pytest
 
 from sepfm_ros.ros import memory
 
+REPO = Path(__file__).resolve().parent.parent
 NS = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
 
 
@@ -61,6 +65,15 @@ def test_default_xml_in_working_directory_is_left_alone(tmp_path):
 
 
 def test_malloc_settings_apply_on_glibc_and_are_harmless_elsewhere():
+    # process-wide settings: in a child process, so the test process's allocator stays as is
     on_glibc = platform.libc_ver()[0] == "glibc" and ctypes.util.find_library("c") is not None
-    assert memory.configure_malloc() is on_glibc
-    memory.release_free_memory()  # no-op without glibc; must not raise either way
+    code = (
+        "from sepfm_ros.ros import memory\n"
+        "print(memory.configure_malloc())\n"
+        "memory.release_free_memory()\n"  # no-op without glibc; must not raise either way
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True, timeout=60
+    )
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == str(on_glibc)

@@ -7,19 +7,31 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import rclpy
+from rclpy.duration import Duration
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
+from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader
+
+
+def _recorded(bag: Path) -> int:
+    """Messages in the flushed part of a bag being recorded (0 before the first flush)."""
+    try:
+        with BagReader(bag) as reader:
+            return reader.message_count
+    except BagError:
+        return 0
 
 
 def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_domain_id):
     out = tmp_path / "rec"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "sepfm_ros", "record", "-o", str(out), "/rec_test/text",
-         "/rec_test/image"],
+        [sys.executable, "-m", "sepfm_ros", "record", "-o", str(out), "--flush-interval", "0.2",
+         "/rec_test/text", "/rec_test/image"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
     )  # fmt: skip
     context = rclpy.Context()
@@ -29,18 +41,24 @@ def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_do
         pub_text = node.create_publisher(String, "/rec_test/text", 10)
         pub_image = node.create_publisher(Image, "/rec_test/image", 10)
         other = node.create_publisher(String, "/rec_test/not_recorded", 10)
-        deadline = time.monotonic() + 30
+        deadline = time.monotonic() + 60
         while pub_text.get_subscription_count() < 1 or pub_image.get_subscription_count() < 1:
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, "the recorder never subscribed"
             time.sleep(0.05)
-        time.sleep(0.5)  # the recorder's side of discovery
+        # reliable publishers that have matched the recorder's subscriptions keep the messages
+        # until the recorder acknowledges them, however late its side of discovery completes
         for i in range(10):
             pub_text.publish(String(data=f"message {i}"))
             pub_image.publish(Image(height=1, width=2, encoding="mono8", step=2, data=[i, i + 1]))
             other.publish(String(data="ignored"))
-            time.sleep(0.02)
-        time.sleep(0.5)
+        for pub in (pub_text, pub_image):
+            assert pub.wait_for_all_acked(Duration(seconds=30)), "the recorder never acknowledged"
+        # the recorder flushes a readable segment every 0.2 s: wait until all 20 are on disk
+        while _recorded(out) < 20:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, f"only {_recorded(out)} of 20 messages recorded"
+            time.sleep(0.05)
     finally:
         proc.send_signal(signal.SIGINT)
         _, err = proc.communicate(timeout=30)

@@ -3,10 +3,12 @@
 from __future__ import annotations
 
 import numpy as np
+from builtin_interfaces.msg import Time
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync, stamp_to_ns
+from sepfm_ros.ros.messages import stamp_ns
+from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
 
 MS = 1_000_000
 PERIOD = 100 * MS  # 10 Hz camera
@@ -120,11 +122,9 @@ def test_configure_validates_and_shrinks():
         raise AssertionError(f"configure{bad} did not raise")
 
 
-def test_stamp_to_ns():
-    class T:
-        sec, nanosec = 3, 250
-
-    assert stamp_to_ns(T) == 3_000_000_250
+def test_stamp_ns():
+    assert stamp_ns(Time(sec=3, nanosec=250)) == 3_000_000_250
+    assert stamp_ns(Time(sec=-2, nanosec=999_999_999)) == -1_000_000_001
 
 
 @settings(max_examples=200, deadline=None)

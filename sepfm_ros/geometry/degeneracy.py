@@ -36,7 +36,7 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.epipolar import homogeneous, normalize_fundamental
+from sepfm_ros.geometry.epipolar import homogeneous, msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
 from sepfm_ros.geometry.ransac import ransac_trials
 from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
@@ -65,12 +65,6 @@ class PlaneCheck:
     candidates: int = 0
     off_plane_chance: float = 0.0
     reason: str | None = None
-
-
-def msac_cost(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, threshold: float) -> np.ndarray:
-    """Truncated quadratic cost sum(min(d^2, t^2)) of (3, 3) or (M, 3, 3) models -> () or (M,)."""
-    d = _sed(F, pts1, pts2)
-    return np.minimum(d * d, threshold * threshold).sum(axis=-1)
 
 
 def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -190,18 +184,18 @@ def plane_and_parallax(
     out.candidates = len(models)
     if not len(models):
         return out
-    costs = msac_cost(models, pts1, pts2, threshold)
+    data = Correspondences.from_pixels(pts1, pts2)
+    costs, _ = msac_kernel(np.ascontiguousarray(models), data.X1, data.X2, threshold)
     best = models[int(np.argmin(costs))]
     # polish the best candidate like the estimator polishes its final model
-    data = Correspondences.from_pixels(pts1, pts2)
     options = [best, *iterative_refit(best, data, threshold)]
     best_inl = _sed(best, pts1, pts2) < threshold
     if np.count_nonzero(best_inl) >= 8:
         options.append(fit_least_squares(pts1[best_inl], pts2[best_inl], irls_iterations=5))
-    options = np.stack(options)
-    option_costs = msac_cost(options, pts1, pts2, threshold)
-    k = int(np.argmin(option_costs))
-    if option_costs[k] < float(msac_cost(F, pts1, pts2, threshold)):
+    options = np.ascontiguousarray(np.stack([*options, F]))
+    option_costs, _ = msac_kernel(options, data.X1, data.X2, threshold)
+    k = int(np.argmin(option_costs[:-1]))
+    if option_costs[k] < option_costs[-1]:  # the last row is the input F
         out.F = normalize_fundamental(options[k])
         out.replaced = True
         new_inl = _sed(out.F, pts1, pts2) < threshold

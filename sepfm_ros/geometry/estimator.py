@@ -15,6 +15,7 @@ Methods (all through the same sampler, scoring, local optimisation and final ref
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass, fields, replace
 from typing import Any
 
 import numba
@@ -27,12 +28,13 @@ from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
 from sepfm_ros.geometry.line_pairs import (
+    LinePair,
     LineSearchOptions,
     find_line_pairs,
     line_parameter,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import RaceOptions, run_ransac
+from sepfm_ros.geometry.ransac import RaceOptions, RansacResult, run_ransac
 from sepfm_ros.geometry.refine import iterative_refit
 
 # method -> (separable?, solver, scoring)
@@ -48,19 +50,81 @@ _METHODS: dict[str, tuple[bool, str, str]] = {
 METHODS = tuple(_METHODS)
 TRIPLES = ("raw", "synthesized", "all")
 
-_DEFAULTS: dict[str, Any] = {
-    "max_samples": 10000,  # cap on RANSAC samples (stage 2 / standard), all arms together
-    "refine": True,  # Sampson refinement of the final model
-    "hough_width": 512,  # working resolution of the line search (px)
-    "hough_min_votes": 4,
-    "line_distance": 1.5,  # C: point-line incidence distance, working px
-    "hough_points": 300,  # best matches drawn into the binary images
-    "max_line_pairs": 4,  # line pairs that race in stage 2
-    "line_threshold": 0.5,  # T1: H_e inlier threshold, working px
-    "min_line_inliers": 4,
-    "triple": "raw",  # "raw" sample points or "synthesized" from the refined H_e
-    "plane_check": True,  # DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py)
-}
+
+@dataclass(frozen=True)
+class EstimatorOptions:
+    """Options of :func:`estimate_fundamental` beyond method, threshold, confidence and seed.
+
+    Values are converted to the field's type (``int``, ``float``, ``bool``) and checked when the
+    object is made; bad values raise ``ValueError``.
+
+    Attributes:
+        max_samples: cap on RANSAC samples (stage 2 or standard), all racing arms together.
+        refine: Sampson (IRLS) refinement of the final model.
+        hough_width: working resolution of the line search, px.
+        hough_min_votes: least votes of a Hough line.
+        line_distance: C, the point-line incidence distance, working px.
+        hough_points: best matches drawn into the binary images of the line search.
+        max_line_pairs: line pairs whose stage-2 arms race.
+        line_threshold: T1, the H_e inlier threshold of stage 1, working px.
+        min_line_inliers: line correspondences that must agree with H_e (>= 3).
+        triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
+            H_e inliers as the fixed line correspondences of stage 2.
+        plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
+    """
+
+    max_samples: int = 10000
+    refine: bool = True
+    hough_width: int = 512
+    hough_min_votes: int = 4
+    line_distance: float = 1.5
+    hough_points: int = 300
+    max_line_pairs: int = 4
+    line_threshold: float = 0.5
+    min_line_inliers: int = 4
+    triple: str = "raw"
+    plane_check: bool = True
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            value = getattr(self, f.name)
+            kind = {"int": int, "float": float, "bool": bool, "str": str}[str(f.type)]
+            try:
+                converted = kind(value)
+            except (TypeError, ValueError) as exc:
+                raise ValueError(f"option {f.name} must be {f.type}, got {value!r}") from exc
+            if kind is float and not np.isfinite(converted):
+                raise ValueError(f"option {f.name} must be finite, got {value!r}")
+            object.__setattr__(self, f.name, converted)
+        least = {"max_samples": 1, "hough_width": 1, "hough_min_votes": 1, "hough_points": 1,
+                 "max_line_pairs": 1, "min_line_inliers": 3}  # fmt: skip
+        for name, low in least.items():
+            if getattr(self, name) < low:
+                raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
+        for name in ("line_distance", "line_threshold"):
+            if getattr(self, name) <= 0:
+                raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
+        if self.triple not in TRIPLES:
+            raise ValueError(f"triple must be one of {TRIPLES}, got {self.triple!r}")
+
+    @classmethod
+    def from_kwargs(cls, base: EstimatorOptions | None = None, **kwargs: Any) -> EstimatorOptions:
+        """``base`` (default: the defaults) with the named fields replaced."""
+        known = [f.name for f in fields(cls)]
+        unknown = set(kwargs) - set(known)
+        if unknown:
+            raise ValueError(f"unknown options {sorted(unknown)}; known: {sorted(known)}")
+        return replace(base or cls(), **kwargs)
+
+    def line_search(self) -> LineSearchOptions:
+        """Options of the line-pair search (two pairs beyond those that race, as spares)."""
+        return LineSearchOptions(
+            width=self.hough_width,
+            min_votes=self.hough_min_votes,
+            distance=self.line_distance,
+            hough_points=self.hough_points,
+            max_pairs=self.max_line_pairs + 2,
+        )
 
 
 def _validate_points(pts1: Any, pts2: Any, min_points: int) -> tuple[np.ndarray, np.ndarray]:
@@ -237,7 +301,8 @@ def estimate_fundamental(
     threshold: float = 1.0,
     confidence: float = 0.99,
     seed: int | None = None,
-    **options: Any,
+    options: EstimatorOptions | None = None,
+    **kwargs: Any,
 ) -> Estimate:
     """Estimate F (x2^T F x1 = 0) from putative matches with the separable method or a baseline.
 
@@ -248,136 +313,163 @@ def estimate_fundamental(
         threshold: inlier threshold, px of symmetric epipolar distance.
         confidence: RANSAC confidence for adaptive termination F(k, r).
         seed: seed of the ``numpy.random.Generator`` behind every random choice.
-        **options: see ``_DEFAULTS`` in this module (max_samples, refine, hough_width,
-            hough_min_votes, line_distance, hough_points, max_line_pairs, line_threshold,
-            min_line_inliers, triple, plane_check).
+        options: an :class:`EstimatorOptions` (default: its defaults).
+        **kwargs: fields of :class:`EstimatorOptions` replacing those of ``options``
+            (``max_samples=300, hough_width=384``, ...).
     Raises:
         ValueError: unknown method or option, malformed points or sizes, too few points.
     """
     t_start = time.perf_counter()
     if method not in _METHODS:
         raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
-    unknown = set(options) - set(_DEFAULTS)
-    if unknown:
-        raise ValueError(f"unknown options {sorted(unknown)}; known: {sorted(_DEFAULTS)}")
-    opt = {**_DEFAULTS, **options}
+    opt = EstimatorOptions.from_kwargs(options, **kwargs)
     if not (np.isfinite(threshold) and threshold > 0):
         raise ValueError(f"threshold must be positive, got {threshold}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    if opt["triple"] not in TRIPLES:
-        raise ValueError(f"triple must be one of {TRIPLES}, got {opt['triple']!r}")
     separable, solver, scoring = _METHODS[method]
-    min_points = 7 if solver == "seven" else 8
     size1 = _validate_size(image_size1, "image_size1")
     size2 = _validate_size(image_size1 if image_size2 is None else image_size2, "image_size2")
-    p1, p2 = _validate_points(pts1, pts2, min_points)
-    n = len(p1)
+    p1, p2 = _validate_points(pts1, pts2, 7 if solver == "seven" else 8)
     rng = np.random.default_rng(seed)
-    est = Estimate(F=None, inliers=np.zeros(n, dtype=bool), method=method)
-
+    est = Estimate(F=None, inliers=np.zeros(len(p1), dtype=bool), method=method)
     reason = _degeneracy(p1, p2, threshold)
+    if reason is None:
+        data = Correspondences.from_pixels(p1, p2)
+        problem = _Problem(data, solver, scoring, threshold, confidence, opt, rng)
+        if separable:
+            result = _separable(problem, est, size1, size2)
+        else:
+            t2 = time.perf_counter()
+            result = problem.standard()
+            est.stage2_hypotheses = result.hypotheses
+            est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
+        est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
+        if result.model is None:
+            reason = "no model: every sample was degenerate"
+        else:
+            _finish(problem, est, result.model)
     if reason is not None:
         est.status = reason
-        est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
-        return est
+    est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
+    return est
 
-    data = Correspondences.from_pixels(p1, p2)
-    max_samples = int(opt["max_samples"])
 
-    def standard(initial=None):
-        arm = FundamentalProblem(data, solver, threshold, scoring)
-        return run_ransac([arm], rng, confidence, max_samples, initial=initial)
+@dataclass
+class _Problem:
+    """What every step of one estimate shares: the matches, the method's solver and scoring,
+    the thresholds, the options and the random generator."""
 
-    result = None
-    if separable:
-        t0 = time.perf_counter()
-        lopts = LineSearchOptions(
-            width=int(opt["hough_width"]),
-            min_votes=int(opt["hough_min_votes"]),
-            distance=float(opt["line_distance"]),
-            hough_points=int(opt["hough_points"]),
-            max_pairs=max(1, int(opt["max_line_pairs"])) + 2,
-        )
-        pairs = find_line_pairs(p1, p2, size1, size2, lopts)
-        t1 = time.perf_counter()
-        est.timings_ms["lines"] = 1e3 * (t1 - t0)
-        s1 = working_scale(size1, lopts.width)
-        s2 = working_scale(size2, lopts.width)
-        k_stage2 = (7 if solver == "seven" else 8) - 3
-        fits: list[LineHomographyFit] = []
-        stage1_s = [0.0]
+    data: Correspondences
+    solver: str
+    scoring: str
+    threshold: float
+    confidence: float
+    opt: EstimatorOptions
+    rng: np.random.Generator
 
-        def stage2_arms():
-            """Stage 1 on the next line pair, run only when its stage-2 arm joins the race."""
-            for pair in pairs:
-                if len(fits) >= int(opt["max_line_pairs"]):
-                    return
-                t = time.perf_counter()
-                fit, h = fit_line_homography(
-                    pair, p1, p2, size1, size2, s1, s2, rng,
-                    threshold=float(opt["line_threshold"]), confidence=confidence,
-                    min_inliers=int(opt["min_line_inliers"]),
-                )  # fmt: skip
-                est.stage1_hypotheses += h
-                stage1_s[0] += time.perf_counter() - t
-                if fit is None:
-                    continue
-                off_pair = np.ones(n, dtype=bool)
-                off_pair[pair.support] = False
-                pool = np.flatnonzero(off_pair)
-                if len(pool) < k_stage2:
-                    continue
-                f1, f2 = _triples(fit, p1, p2, opt["triple"])
-                fits.append(fit)
-                yield FundamentalProblem(data, solver, threshold, scoring, f1, f2, pool)
+    def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
+        """Standard RANSAC over all matches (optionally starting from ``initial``)."""
+        arm = FundamentalProblem(self.data, self.solver, self.threshold, self.scoring)
+        return run_ransac([arm], self.rng, self.confidence, self.opt.max_samples, initial=initial)
 
-        result = run_ransac(stage2_arms(), rng, confidence, max_samples, race=RaceOptions())
-        est.stage2_hypotheses += result.hypotheses
-        if fits and result.leader >= 0:
-            best = fits[result.leader]
-            est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
-            est.line_inliers = best.inliers
-            est.H_e = best.H
-            est.control_points = (best.ctrl1, best.ctrl2)
-        est.timings_ms["stage1"] = 1e3 * stage1_s[0]
-        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t1 - stage1_s[0])
-        if not fits:
-            result = None
-        if result is None or not result.converged:
-            # no usable line pair, or stage 2 hit its cap (a wrong fixed triple is the usual
-            # cause): standard RANSAC, starting from the best model so far
-            t3 = time.perf_counter()
-            initial = None
-            if result is not None and result.model is not None:
-                initial = (result.model, result.cost, result.count)
-            result = standard(initial)
-            est.fallback = True
-            est.stage2_hypotheses += result.hypotheses
-            est.timings_ms["fallback"] = 1e3 * (time.perf_counter() - t3)
-    else:
-        t2 = time.perf_counter()
-        result = standard()
-        est.stage2_hypotheses = result.hypotheses
-        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
-    est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
 
+def _separable(
+    problem: _Problem, est: Estimate, size1: tuple[float, float], size2: tuple[float, float]
+) -> RansacResult:
+    """The separable method: line pairs, stage 1 on each as its arm joins the stage-2 race, and
+    standard RANSAC from the best model so far when no line pair helps or stage 2 hits its cap
+    (a wrong fixed triple is the usual cause). Fills ``est``'s line-pair fields and timings."""
+    d, opt = problem.data, problem.opt
+    t0 = time.perf_counter()
+    lopts = opt.line_search()
+    pairs = find_line_pairs(d.pts1, d.pts2, size1, size2, lopts)
+    t1 = time.perf_counter()
+    est.timings_ms["lines"] = 1e3 * (t1 - t0)
+    scales = (working_scale(size1, lopts.width), working_scale(size2, lopts.width))
+    fits: list[LineHomographyFit] = []
+    stage1_s = [0.0]
+
+    def stage2_arms():
+        """Stage 1 on the next line pair, run only when its stage-2 arm joins the race."""
+        for pair in pairs:
+            if len(fits) >= opt.max_line_pairs:
+                return
+            t = time.perf_counter()
+            arm = _stage2_arm(problem, pair, size1, size2, scales, est, fits)
+            stage1_s[0] += time.perf_counter() - t
+            if arm is not None:
+                yield arm
+
+    result = run_ransac(
+        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions()
+    )
+    est.stage2_hypotheses += result.hypotheses
+    if fits and result.leader >= 0:
+        best = fits[result.leader]
+        est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
+        est.line_inliers = best.inliers
+        est.H_e = best.H
+        est.control_points = (best.ctrl1, best.ctrl2)
+    est.timings_ms["stage1"] = 1e3 * stage1_s[0]
+    est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t1 - stage1_s[0])
+    if fits and result.converged:
+        return result
+    t3 = time.perf_counter()
+    initial = None
+    if fits and result.model is not None:
+        initial = (result.model, result.cost, result.count)
+    result = problem.standard(initial)
+    est.fallback = True
+    est.stage2_hypotheses += result.hypotheses
+    est.timings_ms["fallback"] = 1e3 * (time.perf_counter() - t3)
+    return result
+
+
+def _stage2_arm(
+    problem: _Problem,
+    pair: LinePair,
+    size1: tuple[float, float],
+    size2: tuple[float, float],
+    scales: tuple[float, float],
+    est: Estimate,
+    fits: list[LineHomographyFit],
+) -> FundamentalProblem | None:
+    """Stage 1 on ``pair``; its stage-2 arm (appending the fit to ``fits``), or None when
+    stage 1 fails or too few matches lie off the pair to sample from."""
+    d, opt = problem.data, problem.opt
+    fit, h = fit_line_homography(
+        pair, d.pts1, d.pts2, size1, size2, scales[0], scales[1], problem.rng,
+        threshold=opt.line_threshold, confidence=problem.confidence,
+        min_inliers=opt.min_line_inliers,
+    )  # fmt: skip
+    est.stage1_hypotheses += h
+    if fit is None:
+        return None
+    off_pair = np.ones(len(d), dtype=bool)
+    off_pair[pair.support] = False
+    pool = np.flatnonzero(off_pair)
+    if len(pool) < (7 if problem.solver == "seven" else 8) - 3:
+        return None
+    f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
+    fits.append(fit)
+    return FundamentalProblem(d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool)
+
+
+def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
+    """Final model (refit, refinement, plane check), inliers and status into ``est``."""
+    d, threshold = problem.data, problem.threshold
     t4 = time.perf_counter()
-    F = result.model
-    if F is None:
-        est.status = "no model: every sample was degenerate"
-        est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
-        return est
-    F, refits = _final_model(F, data, threshold, bool(opt["refine"]))
+    F, refits = _final_model(F, d, threshold, problem.opt.refine)
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
     plane = None
-    if opt["plane_check"]:
-        check = plane_and_parallax(F, p1, p2, threshold, rng)
+    if problem.opt.plane_check:
+        check = plane_and_parallax(F, d.pts1, d.pts2, threshold, problem.rng)
         F, plane = check.F, check.reason
         est.stage2_hypotheses += check.candidates
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
-    est.inliers = data.distances(F) < threshold
+    est.inliers = d.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
     k = est.num_inliers
     if k < 8:
@@ -385,9 +477,8 @@ def estimate_fundamental(
     elif plane is not None:
         est.status = plane
     else:
-        est.status = _line_band_status(p1[est.inliers], p2[est.inliers], threshold) or est.status
-    est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
-    return est
+        p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]
+        est.status = _line_band_status(p1, p2, threshold) or est.status
 
 
 def _final_model(

@@ -17,6 +17,7 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.line_pairs import LinePair, control_points, line_parameter
+from sepfm_ros.geometry.ransac import trials_needed
 from sepfm_ros.geometry.solvers.line_homography import (
     line_homography_3pt_kernel,
     line_homography_lsq_kernel,
@@ -49,21 +50,6 @@ class LineHomographyFit:
         p1 = self.ctrl1[0] + t[:, None] * (self.ctrl1[1] - self.ctrl1[0])
         p2 = self.ctrl2[0] + tp[:, None] * (self.ctrl2[1] - self.ctrl2[0])
         return p1, p2
-
-
-@numba.njit(cache=True, nogil=True)
-def _trials_needed(count: int, n: int, confidence: float, cap: int) -> int:
-    """F(3, r) for inlier ratio count / n, capped (as ransac.ransac_trials with max_trials)."""
-    w = min(1.0, count / n) if n > 0 else 0.0
-    if w <= 0.0:
-        return cap
-    p = w**3
-    if p >= 1.0:
-        return 1
-    denom = np.log1p(-p)
-    if denom == 0.0:
-        return cap
-    return max(1, min(cap, int(np.ceil(np.log1p(-confidence) / denom))))
 
 
 @numba.njit(cache=True, nogil=True)
@@ -113,7 +99,10 @@ def stage1_ransac(
     batches growing 1, 1, 2, 4, ... (at most ``batch``), minimal solve, MSAC score at
     ``threshold``, local optimisation (least squares on the inliers, at least 4) of every
     minimal-sample model that beats the best minimal-sample model so far, adaptive stopping
-    after F(3, r) samples.
+    after F(3, r) samples (:func:`~sepfm_ros.geometry.ransac.trials_needed`, shared with the
+    generic loop). It stays a compiled twin because stage 1 runs once per line pair on a few
+    dozen points, where the generic loop's per-batch Python overhead would dominate; a parity
+    test (test_line_pairs_stage1.py) runs both loops on the same data.
 
     Args:
         t1, t2: (K,) line parameters of the correspondences (K >= 3).
@@ -138,7 +127,7 @@ def stage1_ransac(
     if K < 3 or cap == 0:
         return best, False, 0
     while True:
-        need = max(_trials_needed(max(best_count, 0), K, confidence, cap), 1)
+        need = max(trials_needed(3, max(best_count, 0), K, confidence, cap), 1)
         b = min(max(need - samples, 1), min(batch, max(1, samples)))
         b = min(b, cap - samples)
         if b > 0:
@@ -186,7 +175,7 @@ def stage1_ransac(
                     if cost < best_cost:
                         best[:] = lh
                         best_cost, best_count = cost, count
-        if best_count >= 0 and samples >= _trials_needed(best_count, K, confidence, cap):
+        if best_count >= 0 and samples >= trials_needed(3, best_count, K, confidence, cap):
             break
         if samples >= cap:
             break

@@ -11,6 +11,33 @@ import numba
 import numpy as np
 
 
+@numba.njit(cache=True, nogil=True)
+def trial_count(k: int, inlier_ratio: float, confidence: float) -> float:
+    """The paper's F(k, r) at r = 1 - ``inlier_ratio``, uncapped (inf when no sample of k can be
+    all inliers); the one implementation behind :func:`ransac_trials`, the RANSAC loop and the
+    compiled stage 1.
+
+    F(k, r) = ceil(log(1 - p) / log(1 - (1 - r)^k)), at least 1; p is ``confidence``.
+    """
+    w = inlier_ratio**k
+    if w >= 1.0:
+        return 1.0
+    if w <= 0.0:
+        return np.inf
+    denom = np.log1p(-w)
+    if denom == 0.0:
+        return np.inf
+    return max(1.0, np.ceil(np.log1p(-confidence) / denom))
+
+
+@numba.njit(cache=True, nogil=True)
+def trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
+    """F(k, r) for the inlier ratio ``count`` / ``n`` of the best model so far, capped at ``cap``
+    (``cap`` before any inlier is known)."""
+    w = min(1.0, count / n) if n > 0 else 0.0
+    return int(min(trial_count(k, w, confidence), float(cap)))
+
+
 def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | None = None) -> int:
     """The paper's F(k, r): RANSAC trials needed to draw one all-inlier sample of size k.
 
@@ -30,14 +57,7 @@ def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | 
         raise ValueError(f"outlier rate r must be in [0, 1], got {r}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    w = (1.0 - r) ** k
-    if w >= 1.0:
-        n = 1
-    elif w <= 0.0:
-        n = math.inf
-    else:
-        denom = math.log1p(-w)
-        n = math.inf if denom == 0.0 else math.ceil(math.log1p(-confidence) / denom)
+    n = trial_count(int(k), 1.0 - r, float(confidence))
     if max_trials is not None:
         n = min(n, max_trials)
     if n == math.inf:
@@ -128,11 +148,203 @@ def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> 
     return pool[_floyd_samples(rng.random((b, k)), P)]
 
 
-def _trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
-    w = min(1.0, count / n) if n > 0 else 0.0
-    if w <= 0.0:
-        return cap
-    return ransac_trials(k, 1.0 - w, confidence, max_trials=cap)
+@dataclass
+class _Arm:
+    """Book-keeping of one arm during :func:`run_ransac`."""
+
+    problem: Problem
+    samples: int = 0  #: samples drawn
+    best_count: int = -1  #: best inlier count of any of its models (minimal or refined)
+    model: Any = None  #: best minimal-sample model, and its cost and inlier count
+    cost: float = np.inf
+    raw_count: int = 0
+    checked: bool = False  #: its best model was locally optimised before a drop
+
+
+class _Run:
+    """State of one :func:`run_ransac` call; each method is one step of the loop."""
+
+    def __init__(
+        self,
+        arms: Iterable[Problem],
+        rng: np.random.Generator,
+        confidence: float,
+        max_samples: int,
+        min_samples: int,
+        race: RaceOptions,
+        batch: int,
+        extra_lo_ratio: float,
+        max_extra_lo: int,
+    ) -> None:
+        self.source = iter(arms)
+        self.rng, self.confidence, self.race, self.batch = rng, confidence, race, batch
+        self.max_samples, self.min_samples = max_samples, min_samples
+        self.extra_lo_ratio, self.max_extra_lo = extra_lo_ratio, max_extra_lo
+        self.arms: list[_Arm] = []
+        self.active: list[int] = []
+        self.dropped: list[int] = []
+        self.best_model: Any = None
+        self.best_cost = np.inf
+        self.best_count = -1
+        self.leader = -1
+        self.extra_lo = 0
+        self.hypotheses = 0
+        self.total = 0
+        self.n_join = 0
+        self.next_join = race.add_after[0] if race.add_after else max_samples
+
+    def join(self) -> bool:
+        """Pull the next arm from the source; False when there is none."""
+        problem = next(self.source, None)
+        if problem is None:
+            return False
+        self.arms.append(_Arm(problem))
+        self.active.append(len(self.arms) - 1)
+        return True
+
+    def offer(self, a: int, models: Any, cost: np.ndarray, count: np.ndarray) -> int:
+        """Record scored models of arm ``a``; index of the cheapest; updates the best model."""
+        self.hypotheses += len(models)
+        i = int(np.argmin(cost))
+        arm = self.arms[a]
+        arm.best_count = max(arm.best_count, int(count.max()))
+        if cost[i] < self.best_cost:
+            self.best_model, self.best_cost = models[i], float(cost[i])
+            self.best_count, self.leader = int(count[i]), a
+        return i
+
+    def local_optimization(self, a: int, model: Any) -> None:
+        """LO-RANSAC step from ``model`` of arm ``a``."""
+        lo = self.arms[a].problem.local_optimize(model)
+        if len(lo):
+            self.offer(a, lo, *self.arms[a].problem.score(lo))
+
+    def agrees(self, a: int) -> bool:
+        """Arm ``a`` holds the best model or its best support is near the best model's."""
+        return a == self.leader or self.arms[a].best_count >= self.race.drop_ratio * self.best_count
+
+    def pooled_samples(self) -> int:
+        """Samples of the arms that agree with the best model (0 before there is one)."""
+        if self.leader < 0:
+            return 0
+        return sum(arm.samples for a, arm in enumerate(self.arms) if self.agrees(a))
+
+    def needed(self, a: int) -> int:
+        """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``."""
+        p = self.arms[a].problem
+        count = max(self.best_count, 0)
+        need = trials_needed(p.sample_size, count, p.n, self.confidence, self.max_samples)
+        return max(need, self.min_samples)
+
+    def drop_after(self, a: int) -> float:
+        """Samples after which a lagging arm ``a`` is dropped: had its fixed points been
+        right, it would have drawn an all-inlier sample by then with probability
+        1 - drop_alpha (at the best model's inlier ratio)."""
+        p = self.arms[a].problem
+        w = min(1.0, max(self.best_count, 0) / p.n)
+        p_good = w**p.sample_size
+        return float(np.log(self.race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)))
+
+    def sample_round(self) -> None:
+        """Every active arm draws and scores one batch, sized by what is still needed and by the
+        most-sampled arm, so an arm that joins late races at the leader's pace (one growing its
+        own batches from 1 left a good line pair joining after a wrong one too few samples to
+        find its model)."""
+        pace = max(1, max(self.arms[a].samples for a in self.active))
+        for a in list(self.active):
+            need = self.needed(a)
+            done = self.pooled_samples()
+            if self.leader >= 0 and done >= need:
+                break
+            # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
+            b = max(1, min(need - done, self.batch, pace))
+            b = min(b, self.max_samples - self.total)
+            if b > 0:
+                self.sample_arm(a, b)
+
+    def sample_arm(self, a: int, b: int) -> None:
+        """Draw, solve and score ``b`` samples of arm ``a``, then optimise locally.
+
+        LO-RANSAC runs on every minimal-sample model that beats its arm's best minimal-sample
+        model so far. Comparing with the best *refined* model instead would starve LO when
+        minimal samples are badly conditioned (fixed line points), as their raw support then
+        stays below a refined wrong-basin model's; comparing across arms would starve a good
+        line pair racing a wrong one whose fixed points an H_e fits exactly (repetitive
+        texture): the wrong arm's raw models score higher.
+        """
+        arm = self.arms[a]
+        smp = draw_samples(self.rng, arm.problem.pool, arm.problem.sample_size, b)
+        arm.samples += b
+        self.total += b
+        models, _ = arm.problem.solve(smp)
+        if len(models) == 0:
+            return
+        cost, count = arm.problem.score(models)
+        i = self.offer(a, models, cost, count)
+        if cost[i] < arm.cost:
+            arm.model, arm.cost = models[i], float(cost[i])
+            arm.raw_count = int(count[i])
+            self.local_optimization(a, models[i])
+        elif self.extra_lo < self.max_extra_lo and count[i] >= self.extra_lo_ratio * arm.raw_count:
+            self.extra_lo += 1
+            self.local_optimization(a, models[i])
+
+    def converged(self) -> bool:
+        """The arms that agree with the best model drew F(k, r) samples together."""
+        return self.leader >= 0 and self.pooled_samples() >= self.needed(self.leader)
+
+    def drop_lagging(self) -> None:
+        """Drop arms whose support lags (after one local optimisation of their best model, since
+        a minimal sample with fixed line points is often badly conditioned)."""
+        if len(self.arms) <= 1 or self.best_count <= 0:
+            return
+        for a in list(self.active):
+            arm = self.arms[a]
+            if self.agrees(a) or arm.samples < self.drop_after(a):
+                continue
+            if not arm.checked and arm.model is not None:
+                arm.checked = True
+                self.local_optimization(a, arm.model)
+                if self.agrees(a):
+                    continue
+            self.active.remove(a)
+            self.dropped.append(a)
+
+    def join_on_schedule(self) -> None:
+        """Let the next arm join when the race schedule says so or no arm is active."""
+        if self.total < self.next_join and self.active:
+            return
+        if not self.join():
+            self.next_join = self.max_samples + 1
+            return
+        self.n_join += 1
+        add_after = self.race.add_after
+        if self.n_join < len(add_after):
+            self.next_join = add_after[self.n_join]
+        else:
+            self.next_join = int(np.ceil(self.next_join * self.race.add_growth))
+
+    def run(self) -> RansacResult:
+        converged = False
+        while self.active:
+            self.sample_round()
+            if self.converged():
+                converged = True
+                break
+            if self.total >= self.max_samples:
+                break
+            self.drop_lagging()
+            self.join_on_schedule()
+        return RansacResult(
+            model=self.best_model,
+            cost=self.best_cost,
+            count=max(self.best_count, 0),
+            leader=self.leader,
+            hypotheses=self.hypotheses,
+            samples=[arm.samples for arm in self.arms],
+            dropped=self.dropped,
+            converged=converged,
+        )
 
 
 def run_ransac(
@@ -168,168 +380,15 @@ def run_ransac(
         batch: most samples one arm solves and scores in one vectorised call.
         initial: optional (model, cost, count) from an earlier run to start from; it counts as
             arm 0's model.
+        extra_lo_ratio, max_extra_lo: up to ``max_extra_lo`` further local optimisations of
+            models whose support reaches ``extra_lo_ratio`` of their arm's best raw support.
     """
-    race = race or RaceOptions()
-    source = iter(arms)
-    pool: list[Problem] = []
-    samples: list[int] = []
-    arm_best: list[int] = []  # best inlier count per arm
-    arm_model: list[Any] = []  # best minimal-sample model per arm, and its cost
-    arm_cost: list[float] = []
-    arm_raw_count: list[int] = []  # inlier count of the arm's best minimal-sample model
-    arm_checked: list[bool] = []  # arm's best model was locally optimised before a drop
-    active: list[int] = []
-    dropped: list[int] = []
-
-    def join() -> bool:
-        arm = next(source, None)
-        if arm is None:
-            return False
-        pool.append(arm)
-        samples.append(0)
-        arm_best.append(-1)
-        arm_model.append(None)
-        arm_cost.append(np.inf)
-        arm_raw_count.append(0)
-        arm_checked.append(False)
-        active.append(len(pool) - 1)
-        return True
-
-    join()
-    best_model, best_cost, best_count, leader = None, np.inf, -1, -1
-    extra_lo = 0
-    hypotheses = 0
-
-    def local_optimization(a: int, model: Any) -> None:
-        """LO-RANSAC step from ``model`` of arm ``a``; updates the best model and arm_best."""
-        nonlocal best_model, best_cost, best_count, leader, hypotheses
-        lo = pool[a].local_optimize(model)
-        if not len(lo):
-            return
-        lcost, lcount = pool[a].score(lo)
-        hypotheses += len(lo)
-        j = int(np.argmin(lcost))
-        arm_best[a] = max(arm_best[a], int(lcount.max()))
-        if lcost[j] < best_cost:
-            best_model, best_cost, best_count, leader = lo[j], float(lcost[j]), int(lcount[j]), a
-
-    def agrees(a: int) -> bool:
-        """Arm ``a`` holds the best model or its best support is near the best model's."""
-        return a == leader or arm_best[a] >= race.drop_ratio * best_count
-
-    def pooled_samples() -> int:
-        """Samples of the arms that agree with the best model (0 before there is one)."""
-        if leader < 0:
-            return 0
-        return sum(n for a, n in enumerate(samples) if agrees(a))
-
-    def drop_after(a: int) -> float:
-        """Samples after which a lagging arm ``a`` is dropped: had its fixed points been
-        right, it would have drawn an all-inlier sample by then with probability
-        1 - drop_alpha (at the best model's inlier ratio)."""
-        w = min(1.0, max(best_count, 0) / pool[a].n)
-        p_good = w ** pool[a].sample_size
-        return float(np.log(race.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)))
-
-    if initial is not None and pool:
-        best_model, best_cost, best_count = initial
-        leader = 0
-    total = 0
-    n_join = 0
-    next_join = race.add_after[0] if race.add_after else max_samples
-    converged = False
-
-    while active:
-        # one round: every active arm draws the same batch, sized by what is still needed and
-        # by the most-sampled arm, so an arm that joins late races at the leader's pace (one
-        # growing its own batches from 1 left a good line pair joining after a wrong one too
-        # few samples to find its model)
-        pace = max(1, max(samples[a] for a in active))
-        for a in list(active):
-            arm = pool[a]
-            need = _trials_needed(
-                arm.sample_size, max(best_count, 0), arm.n, confidence, max_samples
-            )
-            need = max(need, min_samples)
-            done = pooled_samples()
-            if leader >= 0 and done >= need:
-                break
-            # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
-            b = max(1, min(need - done, batch, pace))
-            b = min(b, max_samples - total)
-            if b <= 0:
-                continue
-            smp = draw_samples(rng, arm.pool, arm.sample_size, b)
-            samples[a] += b
-            total += b
-            models, _ = arm.solve(smp)
-            if len(models) == 0:
-                continue
-            cost, count = arm.score(models)
-            hypotheses += len(models)
-            i = int(np.argmin(cost))
-            arm_best[a] = max(arm_best[a], int(count.max()))
-            improved = cost[i] < arm_cost[a]
-            if improved:
-                arm_model[a], arm_cost[a] = models[i], float(cost[i])
-            if cost[i] < best_cost:
-                best_model, best_cost, best_count, leader = (
-                    models[i],
-                    float(cost[i]),
-                    int(count[i]),
-                    a,
-                )
-            # LO-RANSAC: optimise every minimal-sample model that beats its arm's best
-            # minimal-sample model so far. Comparing with the best *refined* model instead would
-            # starve LO when minimal samples are badly conditioned (fixed line points), as their
-            # raw support then stays below a refined wrong-basin model's; comparing across arms
-            # would starve a good line pair racing a wrong one whose fixed points an H_e fits
-            # exactly (repetitive texture): the wrong arm's raw models score higher.
-            if improved:
-                arm_raw_count[a] = int(count[i])
-                local_optimization(a, models[i])
-            elif extra_lo < max_extra_lo and count[i] >= extra_lo_ratio * arm_raw_count[a]:
-                extra_lo += 1
-                local_optimization(a, models[i])
-        # adaptive stopping on the samples of the arms that agree with the best model
-        if leader >= 0:
-            arm = pool[leader]
-            need = _trials_needed(arm.sample_size, best_count, arm.n, confidence, max_samples)
-            if pooled_samples() >= max(need, min_samples):
-                converged = True
-                break
-        if total >= max_samples:
-            break
-        # racing: drop lagging arms (after one local optimisation of their best model, since a
-        # minimal sample with fixed line points is often badly conditioned), let the next join
-        if len(pool) > 1 and best_count > 0:
-            for a in list(active):
-                if agrees(a) or samples[a] < drop_after(a):
-                    continue
-                if not arm_checked[a] and arm_model[a] is not None:
-                    arm_checked[a] = True
-                    local_optimization(a, arm_model[a])
-                    if agrees(a):
-                        continue
-                active.remove(a)
-                dropped.append(a)
-        if total >= next_join or not active:
-            if join():
-                n_join += 1
-                next_join = (
-                    race.add_after[n_join]
-                    if n_join < len(race.add_after)
-                    else int(np.ceil(next_join * race.add_growth))
-                )
-            else:
-                next_join = max_samples + 1
-    return RansacResult(
-        model=best_model,
-        cost=best_cost,
-        count=max(best_count, 0),
-        leader=leader,
-        hypotheses=hypotheses,
-        samples=samples,
-        dropped=dropped,
-        converged=converged,
-    )
+    run = _Run(
+        arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,
+        extra_lo_ratio, max_extra_lo,
+    )  # fmt: skip
+    run.join()
+    if initial is not None and run.arms:
+        run.best_model, run.best_cost, run.best_count = initial
+        run.leader = 0
+    return run.run()

@@ -13,23 +13,19 @@ message_filters is not available from PyPI, so this is the stereo node's pairing
 - Emitted pairs therefore have strictly increasing stamps on both sides, each message is used at
   most once, and memory is bounded by ``2 x queue_size`` messages.
 
-Stamps are integer nanoseconds (``sec * 10**9 + nanosec``) to keep comparisons exact.
+Stamps are integer nanoseconds (``sec * 10**9 + nanosec``, :func:`sepfm_ros.ros.messages.stamp_ns`)
+to keep comparisons exact.
 """
 
 from __future__ import annotations
 
 from collections import deque
 from dataclasses import dataclass
-from typing import Any, Generic, TypeVar
+from typing import Generic, TypeVar
 
 T = TypeVar("T")
 
 LEFT, RIGHT = 0, 1
-
-
-def stamp_to_ns(stamp: Any) -> int:
-    """builtin_interfaces/Time (``sec``, ``nanosec``) -> integer nanoseconds."""
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 @dataclass

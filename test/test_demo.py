@@ -1,0 +1,35 @@
+"""``sepfm_ros demo``, README's first command: a real subprocess replays the bundled stereo bag
+through a live node over DDS (loopback) and prints a per-frame table against ground truth."""
+
+from __future__ import annotations
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+# a table row: stamp (sec.nanosec), matches, inliers, hypotheses, F yes/no, error px or -, status
+ROW = re.compile(r"^\s*(\d+\.\d{9})\s+(\d+)\s+(\d+)\s+(\d+)\s+(yes|no)\s+(\S+)\s+(.*)$")
+
+
+@pytest.mark.slow
+def test_demo_prints_an_accurate_f_for_most_frames(tmp_path, ros_domain_id):
+    out = tmp_path / "demo"
+    proc = subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", "demo", "--out", str(out), "--quiet", "--rate", "2"],
+        cwd=REPO, capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert f"ROS_DOMAIN_ID={ros_domain_id}" in proc.stdout  # stayed in the session's domain
+    rows = [m.groups() for m in map(ROW.match, proc.stdout.splitlines()) if m]
+    with_f = [r for r in rows if r[4] == "yes"]
+    accurate = [r for r in with_f if r[5] != "-" and float(r[5]) < 1.0]
+    # the bundled bag has 12 stereo pairs with exact ground truth
+    assert len(rows) >= 10, proc.stdout
+    assert len(accurate) >= 10, proc.stdout
+    assert all(int(r[1]) >= int(r[2]) > 0 for r in with_f), "inliers are a subset of matches"
+    assert re.search(rf"{len(with_f)}/12 frame pairs with F", proc.stdout), proc.stdout
+    assert (out / "debug.png").stat().st_size > 0

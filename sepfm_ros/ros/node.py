@@ -60,8 +60,8 @@ from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
     check_compressed,
     check_image,
-    message_to_numpy,
     numpy_to_image,
+    pair_to_numpy,
 )
 from sepfm_ros.ros.memory import (
     configure_malloc,
@@ -87,8 +87,8 @@ from sepfm_ros.ros.parameters import (
     parameters_help,
     pipeline_config,
 )
-from sepfm_ros.ros.replay import raise_keyboard_interrupt
 from sepfm_ros.ros.scheduling import PairScheduler
+from sepfm_ros.ros.signals import raise_keyboard_interrupt
 from sepfm_ros.ros.subscriptions import ImageSubscription, input_topic
 from sepfm_ros.ros.sync import LEFT, RIGHT
 
@@ -456,8 +456,7 @@ class SepfmNode(Node):
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
         t0 = time.perf_counter()
-        image_a = message_to_numpy(job.msg_a, "mono8")
-        image_b = message_to_numpy(job.msg_b, "mono8")
+        image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
         decode_ms = (time.perf_counter() - t0) * 1e3
         if image_a.shape != image_b.shape:
             raise ImageDecodeError(

@@ -53,7 +53,7 @@ from sepfm_ros.ros.bags.types import (
     header_stamp_ns,
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
-from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import (
     copy_header,
     estimate_info,
@@ -62,7 +62,6 @@ from sepfm_ros.ros.messages import (
     stamp_ns,
 )
 from sepfm_ros.ros.parameters import PARAMS, parameter_error, pipeline_config
-from sepfm_ros.ros.replay import raise_keyboard_interrupt
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
     format_summary,
@@ -71,6 +70,7 @@ from sepfm_ros.ros.results import (
     read_results,
     summarize,
 )
+from sepfm_ros.ros.signals import raise_keyboard_interrupt
 from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
@@ -301,8 +301,7 @@ def process_pair(
     """The node's outputs for one pair as (topic, CDR bytes); mirrors ``SepfmNode._process``."""
     t0 = time.perf_counter()
     try:
-        image_a = message_to_numpy(job.msg_a, "mono8")
-        image_b = message_to_numpy(job.msg_b, "mono8")
+        image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
     except ImageDecodeError as err:
         print(
             f"\nskipping the pair at {job.header.stamp.sec}.{job.header.stamp.nanosec:09d}: {err}",

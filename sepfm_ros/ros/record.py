@@ -33,7 +33,8 @@ from rosbags.interfaces import (
 
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
-from sepfm_ros.ros.replay import absolute_topic, message_class, raise_keyboard_interrupt
+from sepfm_ros.ros.replay import absolute_topic, message_class
+from sepfm_ros.ros.signals import raise_keyboard_interrupt
 
 _INF = QosTime(2147483647, 4294967295)
 

@@ -45,6 +45,7 @@ from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeE
 from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader, StampChecker
 from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
+from sepfm_ros.ros.signals import raise_keyboard_interrupt
 
 GAP_FACTOR = 3.0
 
@@ -361,11 +362,6 @@ def input_remaps(
     spec = detect_inputs(reader, None, left, right, image)
     suffix = COMPRESSED_SUFFIX if spec.transport == "compressed" else ""
     return {src: dst + suffix for src, dst in zip(spec.topics, NODE_INPUTS[spec.mode], strict=True)}
-
-
-def raise_keyboard_interrupt(signum: int, frame: Any) -> None:
-    """A SIGTERM handler: stop like Ctrl-C (so outputs are closed cleanly)."""
-    raise KeyboardInterrupt
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:

@@ -6,15 +6,15 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import yaml
+from ruamel.yaml import YAML
 
-from sepfm_ros.ros.node import PARAMS
+from sepfm_ros.ros.parameters import PARAMS
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "sepfm.yaml"
 
 
 def _yaml_parameters() -> dict:
-    doc = yaml.safe_load(CONFIG.read_text())
+    doc = YAML(typ="safe").load(CONFIG.read_text())
     assert list(doc) == ["/**"], "the file applies to any node name"
     return doc["/**"]["ros__parameters"]
 

@@ -140,11 +140,15 @@ class Client:
                     self.health_log.append((time.monotonic(), level, status.message))
 
     def subscribe_debug(self):
-        self.subs.append(
-            self.ros.node.create_subscription(
-                Image, f"/{self.node_name}/debug_image", self._keep(self.debug), RELIABLE
-            )
+        """Subscribe to ~/debug_image (the node draws it only while subscribed): call
+        :meth:`unsubscribe_debug` when done, so later tests see an undrawn node."""
+        self._debug_sub = self.ros.node.create_subscription(
+            Image, f"/{self.node_name}/debug_image", self._keep(self.debug), RELIABLE
         )
+
+    def unsubscribe_debug(self):
+        self.ros.node.destroy_subscription(self._debug_sub)
+        self._debug_sub = None
 
     def wait_connected(self, timeout: float = 30.0) -> None:
         deadline = time.monotonic() + timeout

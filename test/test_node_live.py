@@ -294,26 +294,28 @@ def test_failed_estimate_publishes_reason_and_no_f(stereo):
 def test_debug_image_and_health(stereo, images):
     _, client = stereo
     client.subscribe_debug()
-    img_a, img_b = KITTI_STEREO[0]
-    deadline = time.monotonic() + 20.0
-    stamp = None
-    while time.monotonic() < deadline:
-        stamp = next_stamp()
-        send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
-        client.wait_info(stamp)
-        time.sleep(0.2)
+    try:
+        img_a, img_b = KITTI_STEREO[0]
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            stamp = next_stamp()
+            send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
+            client.wait_info(stamp)
+            time.sleep(0.2)
+            with client.lock:
+                if client.debug:
+                    break
         with client.lock:
-            if client.debug:
-                break
-    with client.lock:
-        assert client.debug, "no ~/debug_image although subscribed"
-        msg = list(client.debug.values())[-1]
-    assert msg.encoding == "bgr8" and msg.width == 2 * 1241 and msg.height == 376
+            assert client.debug, "no ~/debug_image although subscribed"
+            msg = list(client.debug.values())[-1]
+        assert msg.encoding == "bgr8" and msg.width == 2 * 1241 and msg.height == 376
+    finally:
+        client.unsubscribe_debug()
     health = client.latest_health(after=0.0)
     for key in ("input_rate_left_hz", "output_rate_hz", "synchronized_pairs", "dropped_pairs"):
         assert key in health
-    assert float(health["latency_p50_ms"]) > 0.0
-    assert float(health["latency_p95_ms"]) >= float(health["latency_p50_ms"])
+    assert 0.0 < float(health["latency_p50_ms"]) < 10_000.0
+    assert 0.0 < float(health["latency_p95_ms"]) < 10_000.0
 
 
 def test_overload_drops_frames_instead_of_queueing(stereo, images):

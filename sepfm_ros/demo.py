@@ -83,13 +83,12 @@ def replay_through_node(
     log_path: Path | None = None,
     startup_timeout_s: float = 120.0,
     drain_timeout_s: float = 10.0,
-    reliable_inputs: bool = True,
 ) -> LiveRun:
     """Replay ``bag`` into a fresh ``sepfm`` node subprocess and record its outputs to ``out``.
 
     ``params`` are extra node parameters (``name:=value``); mode and transport follow the bag.
-    The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too. With
-    ``reliable_inputs`` the node's input subscriptions are made reliable (QoS override).
+    The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too. The node
+    runs at its default settings: its subscriptions take the player's (recorded) reliability.
     """
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -107,11 +106,6 @@ def replay_through_node(
         spec = detect_inputs(reader)
         expected = expected_pairs(reader, spec, parse_params(params))
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
-    if reliable_inputs:
-        # Large images (KITTI: 470 kB) sent best effort over loopback UDP lose fragments; the
-        # node's QoS overrides make its input subscriptions reliable, as a bag player's are.
-        for topic in spec.topics:
-            cmd += ["-p", f"qos_overrides.{topic}.subscription.reliability:=reliable"]
     for p in params:
         cmd += ["-p", p]
     log = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115

@@ -158,8 +158,6 @@ def test_replay_with_gaps_repeats_and_backwards_stamps(tmp_path, ros_domain_id, 
         "mode:=motion",
         "-r",
         "image_raw:=/replay_target/image_raw",
-        "-p",
-        "qos_overrides./replay_target/image_raw.subscription.reliability:=reliable",
     )
     try:
         res = subprocess.run(

@@ -38,6 +38,7 @@ import cv2
 import numpy as np
 
 from sepfm_ros.geometry import METHODS, Estimate, estimate_fundamental, symmetric_epipolar_distance
+from sepfm_ros.geometry.camera import CameraModel, undistort_points
 from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
 
 # The fewest matches any estimator method accepts (eight-point needs 8).
@@ -146,6 +147,9 @@ class PipelineResult:
         on_line: (N,) bool, matches on the estimator's line pair that agree with H_e.
         size_a, size_b: (width, height) of the two images.
         timings_ms: stage -> milliseconds (see the module docstring).
+        coordinates: the pixels of ``matches``, ``errors`` and F: "image" (as detected) or
+            "undistorted" (undistorted pixels of each camera's K, when cameras were given).
+        image_matches: with cameras, the matches in image pixels as detected; else None.
     """
 
     matches: Matches
@@ -155,6 +159,8 @@ class PipelineResult:
     size_a: tuple[int, int]
     size_b: tuple[int, int]
     timings_ms: dict[str, float]
+    coordinates: str = "image"
+    image_matches: Matches | None = None
 
     @property
     def ok(self) -> bool:
@@ -319,15 +325,34 @@ class Pipeline:
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
         return MatchedPair(matches, size_a, size_b, timings, cfg, busy)
 
-    def estimate(self, matched: MatchedPair) -> PipelineResult:
+    def estimate(
+        self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None
+    ) -> PipelineResult:
         """Second half of :meth:`process`: F from ``matched`` under ``matched.config``.
 
         Uses no pipeline state, so it may run on another thread than :meth:`match` (e.g. the
         live node estimates one pair while it matches the next).
+
+        Args:
+            cameras: optional (camera of image a, camera of image b). When given, the matched
+                points are undistorted (:func:`~sepfm_ros.geometry.camera.undistort_points`,
+                the identity for D = 0) before estimation, so F, ``matches`` and ``errors`` are
+                in undistorted pixels of K (``result.coordinates == "undistorted"``); timed as
+                stage "undistort".
         """
         t_start = time.perf_counter()
         matches = matched.matches
         timings = dict(matched.timings_ms)
+        image_matches = None
+        if cameras is not None:
+            t0 = time.perf_counter()
+            image_matches = matches
+            matches = Matches(
+                undistort_points(cameras[0], matches.pts_a),
+                undistort_points(cameras[1], matches.pts_b),
+                matches.ratio,
+            )
+            timings["undistort"] = _ms(t0)
         t0 = time.perf_counter()
         estimate = _estimate(matches, matched.size_a, matched.size_b, matched.config)
         timings["estimate"] = _ms(t0)
@@ -347,7 +372,15 @@ class Pipeline:
             on_line[idx[(idx >= 0) & (idx < n)]] = True
         timings["total"] = matched.busy_ms + _ms(t_start)
         return PipelineResult(
-            matches, estimate, errors, on_line, matched.size_a, matched.size_b, timings
+            matches,
+            estimate,
+            errors,
+            on_line,
+            matched.size_a,
+            matched.size_b,
+            timings,
+            "image" if cameras is None else "undistorted",
+            image_matches,
         )
 
     def process(
@@ -357,6 +390,7 @@ class Pipeline:
         key_a: Hashable | None = None,
         key_b: Hashable | None = None,
         prior_timings_ms: dict[str, float] | None = None,
+        cameras: tuple[CameraModel, CameraModel] | None = None,
     ) -> PipelineResult:
         """Match ``image_a`` to ``image_b`` and estimate F (``x_b^T F x_a = 0``).
 
@@ -368,11 +402,13 @@ class Pipeline:
                 (same key = same image); None disables caching for that image.
             prior_timings_ms: stages the caller ran before (e.g. {"decode": 3.2}), reported
                 first in ``timings_ms`` and added to its "total".
+            cameras: optional camera models of a and b: estimate in undistorted pixels of K
+                (see :meth:`estimate`).
         Returns:
             A :class:`PipelineResult`. Estimation failures (too few matches, degenerate data)
             are reported in ``result.estimate.status`` with ``F`` None, never raised.
         """
-        return self.estimate(self.match(image_a, image_b, key_a, key_b, prior_timings_ms))
+        return self.estimate(self.match(image_a, image_b, key_a, key_b, prior_timings_ms), cameras)
 
 
 def _estimate(

@@ -1,0 +1,96 @@
+"""CameraInfo -> camera model, pose -> TransformStamped, check -> DiagnosticStatus."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from diagnostic_msgs.msg import DiagnosticStatus
+from scipy.spatial.transform import Rotation
+from sensor_msgs.msg import CameraInfo
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry.calibration_check import WARN, CalibrationStatus
+from sepfm_ros.geometry.camera import CalibrationError
+from sepfm_ros.geometry.pose import RelativePose
+from sepfm_ros.ros.calibration_msgs import (
+    calibration_error_status,
+    calibration_status,
+    camera_model_from_info,
+    pose_values,
+    relative_transform,
+)
+from sepfm_ros.ros.messages import status_values
+
+K = [718.856, 0.0, 607.1928, 0.0, 718.856, 185.2157, 0.0, 0.0, 1.0]
+
+
+def _info(**kw) -> CameraInfo:
+    msg = CameraInfo(width=1241, height=376, distortion_model="plumb_bob", d=[0.0] * 5)
+    msg.k = K
+    msg.r = [1.0, 0, 0, 0, 1.0, 0, 0, 0, 1.0]
+    msg.p = [718.856, 0, 607.1928, -386.1448, 0, 718.856, 185.2157, 0, 0, 0, 1.0, 0]
+    for k, v in kw.items():
+        setattr(msg, k, v)
+    return msg
+
+
+def test_camera_info_to_model():
+    m = camera_model_from_info(_info(), image_size=(1241, 376))
+    assert m.size == (1241, 376)
+    np.testing.assert_allclose(m.K, np.reshape(K, (3, 3)))
+    assert m.P[0, 3] == pytest.approx(-386.1448)
+
+
+@pytest.mark.parametrize(
+    ("kw", "size", "reason"),
+    [
+        (dict(k=[0.0] * 9), None, "all zeros"),
+        (dict(d=[float("nan")] * 5), None, "NaN"),
+        (dict(), (640, 480), "1241x376"),
+        (dict(binning_x=2), None, "binning"),
+        (dict(distortion_model="weird"), None, "not supported"),
+    ],
+)
+def test_bad_camera_info(kw, size, reason):
+    with pytest.raises(CalibrationError, match=reason):
+        camera_model_from_info(_info(**kw), image_size=size)
+
+
+def test_relative_transform_is_b_in_a():
+    R = Rotation.from_euler("xyz", [2.0, -5.0, 10.0], degrees=True).as_matrix()
+    t = np.array([-0.5, 0.1, 0.2])
+    pose = RelativePose(R, t, 1.0, 100)
+    header = Header(frame_id="ignored")
+    header.stamp.sec, header.stamp.nanosec = 12, 345
+    msg = relative_transform(pose, header, "left_camera_optical_frame", "right_optical")
+    assert msg.header.frame_id == "left_camera_optical_frame"
+    assert msg.child_frame_id == "right_optical"
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (12, 345)
+    q = msg.transform.rotation
+    R_ba = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+    tr = msg.transform.translation
+    p_ba = np.array([tr.x, tr.y, tr.z])
+    # maps b-coordinates to a-coordinates: X_a = R_ba X_b + p_ba inverts X_b = R X_a + t
+    X_a = np.array([0.3, -0.2, 4.0])
+    np.testing.assert_allclose(R_ba @ (R @ X_a + t) + p_ba, X_a, atol=1e-9)
+
+
+def test_pose_values_stereo():
+    pose = RelativePose(np.eye(3), np.array([-0.537, 0.0, 0.0]), 0.99, 400)
+    v = pose_values(pose, "undistorted", scaled=True)
+    assert v["coordinates"] == "undistorted" and v["translation_scale"] == "baseline_m"
+    assert v["translation_direction"] == "1.000000 0.000000 0.000000"
+    assert v["baseline_m"] == pytest.approx(0.537)
+    bad = pose_values(
+        RelativePose(np.eye(3), np.zeros(3), 0.0, 3, "too few inliers: 3"), "image", 0
+    )
+    assert "rotation_deg" not in bad and bad["pose_status"].startswith("too few")
+
+
+def test_calibration_status_message():
+    st = CalibrationStatus(WARN, "stereo calibration drifting", {"epipolar_median_px": 1.5})
+    msg = calibration_status(st, "sepfm")
+    assert msg.name == "sepfm: calibration" and msg.level == DiagnosticStatus.WARN
+    assert status_values(msg)["epipolar_median_px"] == "1.5"
+    err = calibration_error_status(CalibrationError("K is all zeros"), "sepfm")
+    assert err.level == DiagnosticStatus.ERROR and "K is all zeros" in err.message

@@ -19,6 +19,7 @@ import time
 from pathlib import Path
 
 import pytest
+from optional_tools import missing_tool
 
 rclpy = pytest.importorskip("rclpy")
 
@@ -30,7 +31,8 @@ def colcon_install(tmp_path_factory) -> Path:
     colcon = Path(sys.executable).parent / "colcon"
     if not colcon.exists():
         colcon = shutil.which("colcon")
-    assert colcon, "colcon not installed (pip install -e '.[test]' brings colcon-core, colcon-ros)"
+    if not colcon:
+        missing_tool("colcon", "pip install colcon-core colcon-ros, or pip install -e '.[test]'")
     ws = tmp_path_factory.mktemp("colcon_ws")
     cmd = [str(colcon), "--log-base", str(ws / "log"), "build", "--base-paths", str(REPO)]
     cmd += ["--build-base", str(ws / "build"), "--install-base", str(ws / "install")]

@@ -8,6 +8,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from optional_tools import missing_tool
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 
@@ -15,7 +16,7 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 def _ruff() -> list[str]:
     exe = shutil.which("ruff") or str(Path(sys.executable).with_name("ruff"))
     if not Path(exe).exists():
-        pytest.fail("ruff is not installed (it is part of the 'test' extra)")
+        missing_tool("ruff", "pip install ruff==0.17.6, or pip install -e '.[test]'")
     return [exe]
 
 

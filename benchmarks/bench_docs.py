@@ -34,8 +34,8 @@ SECTIONS = {
 PREAMBLE = """# Benchmarks
 
 Every section below is written by the script named in its first line, on the machine described
-under it; rerun that command to regenerate it (other sections stay as they are). Speed figures
-are ratios against OpenCV (and PoseLib) measured in the same run on the same matches.
+there; rerun that command to regenerate it (other sections stay as they are). Times move with
+the machine's load: compare methods within one table (same run, same matches), not across runs.
 """
 
 

@@ -34,15 +34,14 @@ REPO_ROOT = Path(__file__).resolve().parent.parent
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 
 # whole modules that are slow (more than about half a minute on a 2-core machine) or whose
-# assertions bound latency or throughput (``timing``: may fail on a heavily loaded machine)
+# assertions bound latency or throughput (``timing``: may fail on a heavily loaded machine);
+# other modules mark themselves with ``pytestmark``
 MODULE_MARKS: dict[str, tuple[str, ...]] = {
     "test_node_live": ("slow", "timing"),
     "test_robustness_live": ("slow", "timing"),
     "test_robustness_bags": ("slow",),
     "test_bags_replay": ("slow",),
     "test_colcon_run": ("slow",),
-    "test_geometry_real": ("slow",),
-    "test_evaluation_bags": ("slow",),
 }
 
 

@@ -5,10 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
+
+pytestmark = pytest.mark.slow  # every shared pair, about 1.5 min on 2 cores
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 

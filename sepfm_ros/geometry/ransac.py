@@ -247,9 +247,8 @@ class _Run:
 
     def sample_round(self) -> None:
         """Every active arm draws and scores one batch, sized by what is still needed and by the
-        most-sampled arm, so an arm that joins late races at the leader's pace (one growing its
-        own batches from 1 left a good line pair joining after a wrong one too few samples to
-        find its model)."""
+        most-sampled arm, so an arm that joins late races at the leader's pace (why: the race of
+        line pairs in docs/design.md)."""
         pace = max(1, max(self.arms[a].samples for a in self.active))
         for a in list(self.active):
             need = self.needed(a)
@@ -265,12 +264,10 @@ class _Run:
     def sample_arm(self, a: int, b: int) -> None:
         """Draw, solve and score ``b`` samples of arm ``a``, then optimise locally.
 
-        LO-RANSAC runs on every minimal-sample model that beats its arm's best minimal-sample
-        model so far. Comparing with the best *refined* model instead would starve LO when
-        minimal samples are badly conditioned (fixed line points), as their raw support then
-        stays below a refined wrong-basin model's; comparing across arms would starve a good
-        line pair racing a wrong one whose fixed points an H_e fits exactly (repetitive
-        texture): the wrong arm's raw models score higher.
+        LO-RANSAC runs on every minimal-sample model that beats its own arm's best
+        minimal-sample model so far (not the best refined model, nor other arms' models: with
+        fixed line points minimal samples are badly conditioned; see docs/design.md), and on up
+        to ``max_extra_lo`` models close to it.
         """
         arm = self.arms[a]
         smp = draw_samples(self.rng, arm.problem.pool, arm.problem.sample_size, b)

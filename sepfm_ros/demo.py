@@ -194,6 +194,7 @@ def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
     from sensor_msgs.msg import Image
 
     from sepfm_ros.ros.image_conversion import message_to_numpy
+    from sepfm_ros.ros.messages import stamp_ns as to_ns
 
     best = None
     with BagReader(live_bag) as reader:
@@ -201,7 +202,7 @@ def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
             return False
         for raw in reader.messages(["/sepfm/debug_image"]):
             msg = deserialize_message(raw.data, Image)
-            s = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+            s = to_ns(msg.header.stamp)
             if best is None or abs(s - stamp_ns) < abs(best[0] - stamp_ns):
                 best = (s, msg)
     if best is None:

@@ -153,8 +153,9 @@ def test_stereo_kitti_left_right_matches_ground_truth(stereo, images, shared_dat
         assert values["stamp_a"] == values["stamp_b"]
         for key in ("method", "hypotheses", "stage1_hypotheses", "stage2_hypotheses", "line_a"):
             assert key in values
-        for stage in ("decode", "features", "match", "estimate", "publish", "total"):
-            assert float(values[f"ms_{stage}"]) >= 0.0
+        ms = {s: float(values[f"ms_{s}"]) for s in ("decode", "features", "match", "estimate")}
+        assert all(v > 0.0 for v in ms.values()), ms
+        assert float(values["ms_total"]) >= ms["features"] + ms["match"] + ms["estimate"]
         with client.lock:
             assert client.fundamental[stamp].header.frame_id == "cam"
             assert client.fundamental[stamp].encoding == "64FC1"
@@ -188,7 +189,7 @@ def test_stereo_sync_with_jittered_stamps(stereo, images):
         right_first=True,
     )
     values, F, _ = client.wait_outputs(stamp)
-    assert F is not None
+    assert np.isclose(np.linalg.norm(F), 1.0)
     assert values["stamp_b"] == f"{(stamp + 3_000_000) // 10**9}.{(stamp + 3_000_000) % 10**9:09d}"
     # right 8 ms after left (outside the slop): never paired
     lone = next_stamp()
@@ -197,7 +198,7 @@ def test_stereo_sync_with_jittered_stamps(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp - 2_000_000))
     client.wait_outputs(stamp)
-    time.sleep(0.5)
+    # answers come in order on one topic: had the lone pair been paired, it would be here now
     with client.lock:
         assert lone not in client.info and lone + 8_000_000 not in client.info
     health = client.latest_health(after=0.0)
@@ -234,7 +235,7 @@ def test_runtime_parameter_change_accepted_and_rejected(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
     values, F, _ = client.wait_outputs(stamp)
-    assert int(values["matches"]) > 150 and F is not None
+    assert int(values["matches"]) > 150
 
 
 def test_malformed_messages_are_skipped_counted_and_logged_once(stereo, images):
@@ -278,7 +279,7 @@ def test_malformed_messages_are_skipped_counted_and_logged_once(stereo, images):
     assert proc.proc.poll() is None
 
 
-def test_failed_estimate_publishes_reason_and_no_f(stereo):
+def test_failed_estimate_publishes_reason_and_no_f(stereo, images):
     _, client = stereo
     blank = np.full((376, 1241), 90, np.uint8)
     stamp = next_stamp()
@@ -286,9 +287,14 @@ def test_failed_estimate_publishes_reason_and_no_f(stereo):
     values, F, cloud = client.wait_outputs(stamp, need_f=False)
     assert F is None and values["status"] != "ok" and values["_msg"] == values["status"]
     assert values["_level"] == DiagnosticStatus.WARN
-    time.sleep(0.5)
+    # a later good pair's F arrives after anything published for the blank one (one topic,
+    # in order): no F was published under the blank pair's stamp
+    good = next_stamp()
+    img_a, img_b = KITTI_STEREO[0]
+    send_pair(client, image_msg(images(img_a), good), image_msg(images(img_b), good))
+    client.wait_outputs(good)
     with client.lock:
-        assert stamp not in client.fundamental  # no stale F under the new stamp
+        assert stamp not in client.fundamental
 
 
 def test_debug_image_and_health(stereo, images):
@@ -350,7 +356,7 @@ def test_pairs_delivered_together_to_an_idle_node_are_all_answered(stereo, image
     before = client.latest_health(after=0.0)
     stamps = []
     for _ in range(6):
-        time.sleep(0.6)  # the node is idle again
+        time.sleep(0.6)  # bursts 0.6 s apart; the node answered the last one, so it is idle
         burst = [next_stamp(), next_stamp()]
         for stamp in burst:
             send_pair(client, image_msg(left, stamp), image_msg(right, stamp))

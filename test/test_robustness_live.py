@@ -734,6 +734,20 @@ def test_dds_peer_started_and_killed_repeatedly_does_not_disturb_node(robust, fr
     assert "Traceback" not in proc.output()
 
 
+def wait_answers_settled(client, quiet_s: float = 0.5, timeout: float = 15.0) -> None:
+    """Wait until the node's answers stop coming (none for ``quiet_s``): the pairs it still had
+    when the input stopped are answered. Fails after ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while True:
+        with client.lock:
+            last = max(client.info_time.values(), default=0.0)
+        now = time.monotonic()
+        if now - last >= quiet_s:
+            return
+        assert now < deadline, f"answers still coming after {timeout} s"
+        time.sleep(0.05)
+
+
 def wait_no_debug_subscriber(client, timeout: float) -> float:
     """Seconds until the node reports no subscriber left on ~/debug_image in /diagnostics (its
     own view of the DDS graph); fails after ``timeout``."""
@@ -803,7 +817,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
     # The rate the node can process: its answers per second while saturated. Its two worker
     # threads overlap matching and estimation, so this is above the sequential rate.
     saturating = _paced(client, frames, 3.0 * sequential_rate, SATURATE_S, sent_at)
-    time.sleep(1.0)
+    wait_answers_settled(client)
     with client.lock:
         answer_times = sorted(client.info_time[s] for s in saturating if s in client.info_time)
     saturated_rate = (len(answer_times) - 1) / (answer_times[-1] - answer_times[0])
@@ -817,7 +831,7 @@ def test_overload_at_twice_the_processing_rate(robust, frames, figures):
         client, frames, 2.0 * rate, OVERLOAD_S, sent_at, proc.proc.pid, rss, skipped_loaded
     )
     cpu1 = (cpu_seconds(proc.proc.pid), cpu_seconds(os.getpid()), time.monotonic())
-    time.sleep(1.0)
+    wait_answers_settled(client)
     rss.append(round(rss_mb(proc.proc.pid), 1))
     mid = client.latest_health(after=1.2)
     lat_loaded = latency_ms(client, loaded, sent_at)

@@ -24,6 +24,7 @@ from sepfm_ros.ros.messages import (
     ESTIMATE_STATUS_NAME,
     fundamental_from_image,
     matches_from_pointcloud2,
+    stamp_ns,
     status_values,
 )
 
@@ -111,15 +112,15 @@ def read_results(
         for msg in reader.messages(wanted):
             if msg.topic == topics["fundamental"]:
                 m = deserialize_message(msg.data, Image)
-                frame(_ns(m.header.stamp)).F = fundamental_from_image(m)
+                frame(stamp_ns(m.header.stamp)).F = fundamental_from_image(m)
             elif msg.topic == topics["matches"]:
                 m = deserialize_message(msg.data, PointCloud2)
-                frame(_ns(m.header.stamp)).cloud = matches_from_pointcloud2(m)
+                frame(stamp_ns(m.header.stamp)).cloud = matches_from_pointcloud2(m)
             else:
                 m = deserialize_message(msg.data, DiagnosticArray)
                 for st in m.status:
                     if st.name == ESTIMATE_STATUS_NAME:
-                        frame(_ns(m.header.stamp)).info = status_values(st)
+                        frame(stamp_ns(m.header.stamp)).info = status_values(st)
     gt = read_ground_truth(gt_bag if gt_bag is not None else bag)
     for stamp, F_gt in gt.items():
         if stamp in frames:
@@ -135,12 +136,8 @@ def read_ground_truth(bag: str | Path) -> dict[int, np.ndarray]:
             return out
         for msg in reader.messages([GROUND_TRUTH_TOPIC]):
             m = deserialize_message(msg.data, Image)
-            out[_ns(m.header.stamp)] = fundamental_from_image(m)
+            out[stamp_ns(m.header.stamp)] = fundamental_from_image(m)
     return out
-
-
-def _ns(stamp) -> int:
-    return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
 def _fmt_err(e: float) -> str:

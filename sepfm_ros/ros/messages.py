@@ -190,6 +190,7 @@ def estimate_values(
     stamp_b: Time,
     features: str,
     extra_timings_ms: Mapping[str, float] | None = None,
+    extra_values: Mapping[str, Any] | None = None,
 ) -> dict[str, Any]:
     """The key/value pairs of ~/estimate_info for one pipeline result (see estimate_info)."""
     est = result.estimate
@@ -210,7 +211,9 @@ def estimate_values(
         "line_b": _line_str(est.line_pair[1]) if est.line_pair is not None else "none",
         "size_a": f"{result.size_a[0]}x{result.size_a[1]}",
         "size_b": f"{result.size_b[0]}x{result.size_b[1]}",
+        "coordinates": result.coordinates,
     }
+    values.update(extra_values or {})
     timings = dict(result.timings_ms)
     timings.update(extra_timings_ms or {})
     for stage, ms in timings.items():
@@ -226,20 +229,23 @@ def estimate_info(
     features: str,
     extra_timings_ms: Mapping[str, float] | None = None,
     node_name: str = "sepfm",
+    extra_values: Mapping[str, Any] | None = None,
 ) -> DiagnosticArray:
     """~/estimate_info: one DiagnosticStatus (name "sepfm: estimate") describing the estimate.
 
     Level OK with message "ok" when F was estimated, WARN with the estimator's reason otherwise.
     Values: stamp_a, stamp_b (sec.nanosec), method, features, status, matches, inliers,
     hypotheses, stage1_hypotheses, stage2_hypotheses, fallback, line_inliers, line_a, line_b
-    ("a b c" of a u + b v + c = 0, or "none"), size_a, size_b and ms_<stage> per timing stage.
+    ("a b c" of a u + b v + c = 0, or "none"), size_a, size_b, coordinates (the pixels of F and
+    the matches: "image", or "undistorted" pixels of K with camera_info), ``extra_values`` (e.g.
+    the relative pose) and ms_<stage> per timing stage.
     """
     ok = result.ok
     status = health_status(
         ESTIMATE_STATUS_NAME,
         DiagnosticStatus.OK if ok else DiagnosticStatus.WARN,
         "ok" if ok else result.estimate.status,
-        estimate_values(result, stamp_a, stamp_b, features, extra_timings_ms),
+        estimate_values(result, stamp_a, stamp_b, features, extra_timings_ms, extra_values),
         hardware_id=node_name,
     )
     return diagnostic_array(header, [status])

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import functools
+import operator
 import os
 import signal
 import threading
@@ -38,6 +39,7 @@ import cv2
 import numpy as np
 import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import TransformStamped
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
@@ -47,6 +49,9 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header
 from threadpoolctl import threadpool_limits
 
+from sepfm_ros.geometry.calibration_check import CalibrationMonitor, MonitorConfig
+from sepfm_ros.geometry.camera import CalibrationError, CameraModel
+from sepfm_ros.pipeline.calibration import CalibratedOutputs, StreamCalibration
 from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.pipeline import (
@@ -55,6 +60,14 @@ from sepfm_ros.pipeline.pipeline import (
     PipelineConfig,
     name_native_thread,
 )
+from sepfm_ros.ros.calibration_msgs import (
+    calibration_error_status,
+    calibration_status,
+    camera_model_from_info,
+    pose_values,
+    relative_transform,
+)
+from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
@@ -83,13 +96,14 @@ from sepfm_ros.ros.parameters import (
     NODE_NAME,
     PARAMS,
     descriptor,
+    monitor_config,
     parameter_error,
     parameters_help,
     pipeline_config,
 )
 from sepfm_ros.ros.scheduling import PairScheduler
 from sepfm_ros.ros.signals import raise_keyboard_interrupt
-from sepfm_ros.ros.subscriptions import ImageSubscription, input_topic
+from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.sync import LEFT, RIGHT
 
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
@@ -179,6 +193,8 @@ class SepfmNode(Node):
         self._health = Health(names, float(values["input_timeout_s"]))
         self._throttle = LogThrottle(LOG_THROTTLE_S)
         self._reported_stall: str | None = None
+        self._threshold_px = float(values["threshold_px"])
+        self._pending_monitor: MonitorConfig | None = None
 
         reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
         self._pub_f = self.create_publisher(Image, "~/fundamental", reliable)
@@ -186,6 +202,8 @@ class SepfmNode(Node):
         self._pub_info = self.create_publisher(DiagnosticArray, "~/estimate_info", reliable)
         self._pub_debug = self.create_publisher(Image, "~/debug_image", reliable)
         self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
+        self._pub_pose = self.create_publisher(TransformStamped, "~/relative_transform", reliable)
+        self._pub_calib = self.create_publisher(DiagnosticStatus, "~/calibration_check", reliable)
 
         msg_type = CompressedImage if self._transport == "compressed" else Image
         if self._mode == "stereo":
@@ -196,7 +214,7 @@ class SepfmNode(Node):
         else:
             inputs = [("image_raw", self._on_motion)]
         self._subs = [
-            ImageSubscription(
+            InputSubscription(
                 self,
                 input_topic(self, base, self._transport),
                 msg_type,
@@ -208,6 +226,25 @@ class SepfmNode(Node):
             )
             for base, callback in inputs
         ]
+        bases = [base for base, _ in inputs]
+        rectified = values["images"] == "rectified" or (
+            values["images"] == "auto" and any("rect" in self.resolve_topic_name(b) for b in bases)
+        )
+        self._calibration = StreamCalibration(
+            self._mode == "stereo", rectified, monitor_config(values)
+        )
+        self._camera_info = None
+        if values["use_camera_info"]:
+            self._camera_info = CameraInfoInputs(
+                self,
+                bases,
+                values["input_reliability"],
+                on_lost=self._on_lost,
+                on_incompatible=self._on_incompatible,
+                on_created=self._on_subscribed,
+            )
+        self._calib_infos: list[Any] | None = None  # the camera_info messages in use
+        self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
@@ -243,6 +280,7 @@ class SepfmNode(Node):
         if not reasons:
             try:
                 pipeline_config(values)
+                monitor_config(values)
             except ValueError as err:
                 reasons.append(str(err))
         if reasons:
@@ -259,6 +297,8 @@ class SepfmNode(Node):
             self._pending_config = config
             self._epipolar_lines = int(values["debug_epipolar_lines"])
             self._publish_unreliable = bool(values["publish_unreliable"])
+            self._threshold_px = float(values["threshold_px"])
+            self._pending_monitor = monitor_config(values)
             self._health.input_timeout_s = float(values["input_timeout_s"])
             self._stereo.configure(
                 int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"]), jump_s
@@ -468,15 +508,88 @@ class SepfmNode(Node):
         )
         return MatchedJob(job, matched, (image_a, image_b), wait_ms, time.monotonic())
 
+    def _cameras(self, item: MatchedJob) -> tuple[CameraModel, CameraModel] | None:
+        """The camera models of the pair's images from the latest camera_info (None without
+        usable ones: the pair is estimated in image pixels). Estimate thread."""
+        infos = None if self._camera_info is None else self._camera_info.latest()
+        with self._lock:
+            pending, self._pending_monitor = self._pending_monitor, None
+        if pending is not None:
+            self._calibration.monitor = CalibrationMonitor(pending)
+        if infos is None:
+            return None
+        if self._mode == "motion":
+            infos = [infos[0], infos[0]]
+        if self._calib_infos is not None and all(map(operator.is_, infos, self._calib_infos)):
+            return self._calibration.cameras  # the same messages as before (None: unusable)
+        self._calib_infos = infos
+        try:
+            sizes = [im.shape[1::-1] for im in item.images]
+            models = [camera_model_from_info(i, sz) for i, sz in zip(infos, sizes, strict=True)]
+            if self._calibration.update(*models):
+                self.get_logger().info(
+                    "camera_info in use: F in undistorted pixels of K"
+                    + (", rectified images" if self._calibration.rectified else "")
+                    + ("" if self._calibration.rig is None else ", stereo calibration check on")
+                )
+        except CalibrationError as err:
+            self._calibration.clear()
+            self._health.problem("camera_info_invalid")
+            self._log_throttled("camera_info_invalid", f"camera_info unusable: {err}")
+            status = calibration_error_status(err, self.get_name(), self.get_fully_qualified_name())
+            with self._lock:
+                self._calib_status = status
+            self._pub_calib.publish(status)
+            return None
+        return self._calibration.cameras
+
+    def _publish_calibrated(
+        self, outputs: CalibratedOutputs, job: Job, header: Header
+    ) -> dict[str, Any]:
+        """~/relative_transform and ~/calibration_check of one pair; returns the pose's values
+        for ~/estimate_info."""
+        values: dict[str, Any] = {}
+        pose = outputs.pose
+        if pose is not None:
+            values.update(pose_values(pose, "undistorted", outputs.scaled))
+            if pose.ok:
+                infos = self._calib_infos or [None, None]
+                frames = [
+                    (info.header.frame_id if info is not None else "") or msg.header.frame_id
+                    for info, msg in zip(infos, (job.msg_a, job.msg_b), strict=True)
+                ]
+                self._pub_pose.publish(relative_transform(pose, header, *frames))
+        if outputs.check is not None:
+            check = outputs.check
+            values["calibration_epipolar_median_px"] = check.epipolar_median_px
+            values["calibration_rotation_error_deg"] = check.rotation_error_deg
+        if outputs.status is not None:
+            status = calibration_status(
+                outputs.status, self.get_name(), self.get_fully_qualified_name()
+            )
+            with self._lock:
+                self._calib_status = status
+            self._pub_calib.publish(status)
+            values["calibration_level"] = outputs.status.level_name
+        return values
+
     def _estimate_and_publish(self, item: MatchedJob) -> None:
         job = item.job
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
-        result = self._pipeline.estimate(item.matched)
-        t0 = time.perf_counter()
+        cameras = self._cameras(item)
+        result = self._pipeline.estimate(item.matched, cameras)
         header = job.header
         with self._lock:
             publish_unreliable = self._publish_unreliable
             n_lines = self._epipolar_lines
+            threshold_px = self._threshold_px
+        extra_values: dict[str, Any] = {}
+        if cameras is not None:
+            t0 = time.perf_counter()
+            outputs = self._calibration.outputs(result, threshold_px)
+            extra_values = self._publish_calibrated(outputs, job, header)
+            result.timings_ms["pose"] = (time.perf_counter() - t0) * 1e3
+        t0 = time.perf_counter()
         published = result.estimate.F is not None and (result.ok or publish_unreliable)
         if published:
             self._pub_f.publish(fundamental_to_image(result.estimate.F, header))
@@ -493,6 +606,7 @@ class SepfmNode(Node):
                 item.matched.config.features,
                 extra_timings_ms={**extra, "latency": latency_ms},
                 node_name=self.get_fully_qualified_name(),
+                extra_values=extra_values,
             )
         )
         if self._pub_debug.get_subscription_count() > 0:
@@ -548,7 +662,11 @@ class SepfmNode(Node):
             self.get_fully_qualified_name(),
         )
         header = Header(stamp=self.get_clock().now().to_msg(), frame_id="")
-        self._pub_diag.publish(diagnostic_array(header, [status]))
+        statuses = [status]
+        with self._lock:
+            if self._calib_status is not None:
+                statuses.append(self._calib_status)
+        self._pub_diag.publish(diagnostic_array(header, statuses))
 
     def shutdown(self) -> None:
         """Stop the worker threads (waits for the pairs in progress)."""

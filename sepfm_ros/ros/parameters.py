@@ -18,6 +18,7 @@ from rcl_interfaces.msg import (
 )
 
 from sepfm_ros.geometry import METHODS
+from sepfm_ros.geometry.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
 
@@ -28,6 +29,9 @@ TRANSPORTS = ("raw", "compressed")
 HOUGH_WIDTH_OPTION = "hough_width"
 # Estimator option that the max_samples parameter sets.
 MAX_SAMPLES_OPTION = "max_samples"
+
+
+_MONITOR = MonitorConfig()  # the calibration check's defaults
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,49 @@ PARAMS: dict[str, ParamSpec] = {
         " plane); ~/estimate_info then carries the reason at WARN level",
     ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
+    "use_camera_info": ParamSpec(
+        True,
+        "use camera_info (beside each image topic) when published: undistort the matched points"
+        " (F in undistorted pixels of K), publish ~/relative_transform and, for a calibrated"
+        " stereo rig, the calibration check",
+        read_only=True,
+    ),
+    "images": ParamSpec(
+        "auto",
+        "what the images are, for camera_info: raw (pixels of K and D), rectified (pixels of P),"
+        " or auto (rectified when the image topic's name contains 'rect')",
+        choices=("auto", "raw", "rectified"),
+        read_only=True,
+    ),
+    "calibration_window": ParamSpec(
+        _MONITOR.window, "calibration check: pairs in the sliding window", 1, 10000
+    ),
+    "calibration_min_pairs": ParamSpec(
+        _MONITOR.min_pairs, "calibration check: usable pairs needed for a decision", 1, 10000
+    ),
+    "calibration_min_inliers": ParamSpec(
+        _MONITOR.min_inliers, "calibration check: inliers a pair needs to count", 5, 100000
+    ),
+    "calibration_warn_epipolar_px": ParamSpec(
+        _MONITOR.warn_epipolar_px,
+        "calibration check: WARN above this window median of the epipolar error under the"
+        " calibrated F, px",
+        0.001,
+        1000.0,
+    ),
+    "calibration_error_epipolar_px": ParamSpec(
+        _MONITOR.error_epipolar_px, "calibration check: ERROR above this, px", 0.001, 1000.0
+    ),
+    "calibration_warn_rotation_deg": ParamSpec(
+        _MONITOR.warn_rotation_deg,
+        "calibration check: WARN above this window median of the rotation between the matches"
+        " and the calibrated rig, deg",
+        0.0001,
+        180.0,
+    ),
+    "calibration_error_rotation_deg": ParamSpec(
+        _MONITOR.error_rotation_deg, "calibration check: ERROR above this, deg", 0.0001, 180.0
+    ),
     "diagnostics_period_s": ParamSpec(
         1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
     ),
@@ -194,3 +241,16 @@ def parameters_help() -> str:
         ro = " (read-only)" if spec.read_only else ""
         lines.append(f"  {name} = {spec.default!r}{rng}{ro}: {spec.description}")
     return "\n".join(lines)
+
+
+def monitor_config(values: dict[str, Any]) -> MonitorConfig:
+    """Node parameter values -> the calibration check's config (ValueError when invalid)."""
+    return MonitorConfig(
+        window=int(values["calibration_window"]),
+        min_pairs=int(values["calibration_min_pairs"]),
+        min_inliers=int(values["calibration_min_inliers"]),
+        warn_epipolar_px=float(values["calibration_warn_epipolar_px"]),
+        error_epipolar_px=float(values["calibration_error_epipolar_px"]),
+        warn_rotation_deg=float(values["calibration_warn_rotation_deg"]),
+        error_rotation_deg=float(values["calibration_error_rotation_deg"]),
+    )

@@ -62,8 +62,8 @@ def offered_reliability(profiles: list[Any]) -> ReliabilityPolicy:
     return ReliabilityPolicy.BEST_EFFORT
 
 
-class ImageSubscription:
-    """One image input of the node (see the module docstring).
+class InputSubscription:
+    """One input of the node: an image or camera_info topic (see the module docstring).
 
     Args:
         node: the node that owns the subscription.

@@ -1,0 +1,142 @@
+"""Calibrated estimation of a stream: the cameras the estimator undistorts with, the relative pose
+from each F, and for a calibrated stereo rig the live calibration check. No ROS; shared by the
+node and offline processing.
+
+:class:`StreamCalibration` holds the latest camera models of the stream (from ``camera_info``):
+
+- :attr:`StreamCalibration.cameras` are the models the pipeline undistorts the matched points
+  with (:meth:`~sepfm_ros.pipeline.pipeline.Pipeline.estimate`): the raw models for raw images
+  (F in undistorted pixels of K), the rectified models (K = P[:, :3], D = 0) for rectified images;
+- :meth:`StreamCalibration.outputs` turns a result into the relative pose of camera b in camera
+  a (unit translation in motion mode; metres of the calibrated baseline for a stereo rig) and,
+  for a stereo rig whose P matrices give a baseline, the pair's check against the calibration
+  and the sliding-window decision (:mod:`sepfm_ros.geometry.calibration_check`).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sepfm_ros.geometry.calibration_check import (
+    CalibrationMonitor,
+    CalibrationStatus,
+    MonitorConfig,
+    PairCheck,
+    StereoCalibration,
+    check_pair,
+)
+from sepfm_ros.geometry.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.pose import RelativePose, relative_pose
+from sepfm_ros.pipeline.pipeline import PipelineResult
+
+
+@dataclass(frozen=True)
+class CalibratedOutputs:
+    """What calibration adds to one pair's result.
+
+    Attributes:
+        pose: relative pose (b in a), None without F; ``pose.status`` says why it is unusable.
+        scaled: the pose's translation is in metres (stereo rig), not unit length.
+        check: the stereo pair's disagreement with the calibration, None without a rig.
+        status: the calibration check's decision after this pair, None without a rig.
+    """
+
+    pose: RelativePose | None
+    scaled: bool
+    check: PairCheck | None
+    status: CalibrationStatus | None
+
+
+def _same(a: CameraModel, b: CameraModel) -> bool:
+    return (
+        a.size == b.size
+        and a.distortion_model == b.distortion_model
+        and all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("K", "D", "R", "P"))
+    )
+
+
+class StreamCalibration:
+    """The calibration of one stream (a stereo rig, or one moving camera).
+
+    Args:
+        stereo: the two images of a pair come from two cameras of a rig (else one camera over
+            time: a and b share the model).
+        rectified: the images are rectified (``image_rect``), so their pixels are P's.
+        monitor: the calibration check's sliding-window parameters.
+    """
+
+    def __init__(self, stereo: bool, rectified: bool, monitor: MonitorConfig | None = None) -> None:
+        self.stereo = stereo
+        self.rectified = rectified
+        self.monitor = CalibrationMonitor(monitor)
+        self._models: tuple[CameraModel, CameraModel] | None = None
+        self.cameras: tuple[CameraModel, CameraModel] | None = None
+        self.rig: StereoCalibration | None = None
+        self.rig_problem: str | None = None  # why a stereo pair has no calibration check
+
+    def update(self, model_a: CameraModel, model_b: CameraModel) -> bool:
+        """Use these camera models (of image a and image b) from now on; True when they
+        changed (the check's window then starts afresh).
+
+        Raises:
+            CalibrationError: the models cannot describe these images (e.g. rectified images
+                with a P without a pinhole part).
+        """
+        if self._models is not None and all(map(_same, self._models, (model_a, model_b))):
+            return False
+        if self.rectified:
+            cameras = (model_a.rectified(), model_b.rectified())
+        else:
+            cameras = (model_a, model_b)
+        rig, problem = None, None
+        if self.stereo:
+            try:
+                rig = StereoCalibration.from_models(model_a, model_b, self.rectified)
+            except (CalibrationError, ValueError, np.linalg.LinAlgError) as err:
+                problem = f"no calibrated stereo geometry in the camera_info P matrices: {err}"
+            if rig is not None and not rig.baseline > 0.0:
+                rig, problem = None, "the camera_info P matrices give no stereo baseline"
+        self._models = (model_a, model_b)
+        self.cameras = cameras
+        self.rig, self.rig_problem = rig, problem
+        self.monitor.reset()
+        return True
+
+    def clear(self) -> None:
+        """Forget the models (calibration became unusable): estimate without them."""
+        self._models = self.cameras = self.rig = None
+        self.rig_problem = None
+        self.monitor.reset()
+
+    def outputs(self, result: PipelineResult, threshold_px: float) -> CalibratedOutputs:
+        """Pose and calibration check of one result estimated with :attr:`cameras`.
+
+        Args:
+            result: the pipeline's result (``coordinates == "undistorted"``).
+            threshold_px: the estimator's inlier threshold (soft-L1 scale of the refinements).
+        """
+        if self.cameras is None or result.coordinates != "undistorted":
+            return CalibratedOutputs(None, False, None, None)
+        est = result.estimate
+        pts_a, pts_b = result.matches.pts_a, result.matches.pts_b
+        pose = None
+        if est.F is not None:
+            K_a, K_b = self.cameras[0].K, self.cameras[1].K
+            pose = relative_pose(est.F, pts_a, pts_b, K_a, K_b, est.inliers, scale_px=threshold_px)
+        scaled = self.rig is not None and pose is not None and pose.ok
+        if scaled:
+            pose = pose.scaled(self.rig.baseline)
+        if self.rig is None:
+            return CalibratedOutputs(pose, scaled, None, None)
+        inliers = est.inliers if est.F is not None else np.zeros(len(pts_a), bool)
+        check = check_pair(
+            self.rig,
+            pts_a,
+            pts_b,
+            inliers,
+            min_inliers=self.monitor.config.min_inliers,
+            scale_px=threshold_px,
+        )
+        return CalibratedOutputs(pose, scaled, check, self.monitor.update(check))

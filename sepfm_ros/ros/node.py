@@ -25,7 +25,6 @@ from __future__ import annotations
 
 import argparse
 import functools
-import operator
 import os
 import signal
 import threading
@@ -49,9 +48,8 @@ from sensor_msgs.msg import CompressedImage, Image, PointCloud2
 from std_msgs.msg import Header
 from threadpoolctl import threadpool_limits
 
-from sepfm_ros.geometry.calibration_check import CalibrationMonitor, MonitorConfig
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel
-from sepfm_ros.pipeline.calibration import CalibratedOutputs, StreamCalibration
+from sepfm_ros.geometry.calibration_check import MonitorConfig
+from sepfm_ros.geometry.camera import CameraModel
 from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.pipeline import (
@@ -60,13 +58,7 @@ from sepfm_ros.pipeline.pipeline import (
     PipelineConfig,
     name_native_thread,
 )
-from sepfm_ros.ros.calibration_msgs import (
-    calibration_error_status,
-    calibration_status,
-    camera_model_from_info,
-    pose_values,
-    relative_transform,
-)
+from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
 from sepfm_ros.ros.image_conversion import (
@@ -230,8 +222,12 @@ class SepfmNode(Node):
         rectified = values["images"] == "rectified" or (
             values["images"] == "auto" and any("rect" in self.resolve_topic_name(b) for b in bases)
         )
-        self._calibration = StreamCalibration(
-            self._mode == "stereo", rectified, monitor_config(values)
+        self._calibrated = CalibratedStream(
+            self._mode == "stereo",
+            rectified,
+            monitor_config(values),
+            self.get_name(),
+            self.get_fully_qualified_name(),
         )
         self._camera_info = None
         if values["use_camera_info"]:
@@ -243,7 +239,6 @@ class SepfmNode(Node):
                 on_incompatible=self._on_incompatible,
                 on_created=self._on_subscribed,
             )
-        self._calib_infos: list[Any] | None = None  # the camera_info messages in use
         self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -511,67 +506,31 @@ class SepfmNode(Node):
     def _cameras(self, item: MatchedJob) -> tuple[CameraModel, CameraModel] | None:
         """The camera models of the pair's images from the latest camera_info (None without
         usable ones: the pair is estimated in image pixels). Estimate thread."""
-        infos = None if self._camera_info is None else self._camera_info.latest()
         with self._lock:
             pending, self._pending_monitor = self._pending_monitor, None
         if pending is not None:
-            self._calibration.monitor = CalibrationMonitor(pending)
-        if infos is None:
-            return None
-        if self._mode == "motion":
-            infos = [infos[0], infos[0]]
-        if self._calib_infos is not None and all(map(operator.is_, infos, self._calib_infos)):
-            return self._calibration.cameras  # the same messages as before (None: unusable)
-        self._calib_infos = infos
-        try:
-            sizes = [im.shape[1::-1] for im in item.images]
-            models = [camera_model_from_info(i, sz) for i, sz in zip(infos, sizes, strict=True)]
-            if self._calibration.update(*models):
-                self.get_logger().info(
-                    "camera_info in use: F in undistorted pixels of K"
-                    + (", rectified images" if self._calibration.rectified else "")
-                    + ("" if self._calibration.rig is None else ", stereo calibration check on")
-                )
-        except CalibrationError as err:
-            self._calibration.clear()
+            self._calibrated.configure_monitor(pending)
+        infos = None if self._camera_info is None else self._camera_info.latest()
+        update = self._calibrated.cameras(infos, [im.shape[1::-1] for im in item.images])
+        if update.error is not None:
             self._health.problem("camera_info_invalid")
-            self._log_throttled("camera_info_invalid", f"camera_info unusable: {err}")
-            status = calibration_error_status(err, self.get_name(), self.get_fully_qualified_name())
+            self._log_throttled("camera_info_invalid", f"camera_info unusable: {update.reason}")
             with self._lock:
-                self._calib_status = status
-            self._pub_calib.publish(status)
-            return None
-        return self._calibration.cameras
-
-    def _publish_calibrated(
-        self, outputs: CalibratedOutputs, job: Job, header: Header
-    ) -> dict[str, Any]:
-        """~/relative_transform and ~/calibration_check of one pair; returns the pose's values
-        for ~/estimate_info."""
-        values: dict[str, Any] = {}
-        pose = outputs.pose
-        if pose is not None:
-            values.update(pose_values(pose, "undistorted", outputs.scaled))
-            if pose.ok:
-                infos = self._calib_infos or [None, None]
-                frames = [
-                    (info.header.frame_id if info is not None else "") or msg.header.frame_id
-                    for info, msg in zip(infos, (job.msg_a, job.msg_b), strict=True)
-                ]
-                self._pub_pose.publish(relative_transform(pose, header, *frames))
-        if outputs.check is not None:
-            check = outputs.check
-            values["calibration_epipolar_median_px"] = check.epipolar_median_px
-            values["calibration_rotation_error_deg"] = check.rotation_error_deg
-        if outputs.status is not None:
-            status = calibration_status(
-                outputs.status, self.get_name(), self.get_fully_qualified_name()
+                self._calib_status = update.error
+            self._pub_calib.publish(update.error)
+        elif update.changed:
+            calibration = self._calibrated.calibration
+            self.get_logger().info(
+                "camera_info in use: F in undistorted pixels of K"
+                + (", rectified images" if calibration.rectified else "")
+                + (
+                    f", no calibration check ({calibration.rig_problem})"
+                    if calibration.rig_problem
+                    else ""
+                )
+                + ("" if calibration.rig is None else ", stereo calibration check on")
             )
-            with self._lock:
-                self._calib_status = status
-            self._pub_calib.publish(status)
-            values["calibration_level"] = outputs.status.level_name
-        return values
+        return update.cameras
 
     def _estimate_and_publish(self, item: MatchedJob) -> None:
         job = item.job
@@ -586,8 +545,15 @@ class SepfmNode(Node):
         extra_values: dict[str, Any] = {}
         if cameras is not None:
             t0 = time.perf_counter()
-            outputs = self._calibration.outputs(result, threshold_px)
-            extra_values = self._publish_calibrated(outputs, job, header)
+            frames = self._calibrated.frames(job.msg_a.header.frame_id, job.msg_b.header.frame_id)
+            calibrated = self._calibrated.messages(result, threshold_px, header, frames)
+            extra_values = calibrated.values
+            if calibrated.transform is not None:
+                self._pub_pose.publish(calibrated.transform)
+            if calibrated.status is not None:
+                with self._lock:
+                    self._calib_status = calibrated.status
+                self._pub_calib.publish(calibrated.status)
             result.timings_ms["pose"] = (time.perf_counter() - t0) * 1e3
         t0 = time.perf_counter()
         published = result.estimate.F is not None and (result.ok or publish_unreliable)

@@ -26,6 +26,7 @@ Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupt
 from __future__ import annotations
 
 import argparse
+import bisect
 import signal
 import sys
 import time
@@ -38,7 +39,7 @@ from typing import Any
 from rclpy.serialization import deserialize_message, serialize_message
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosLiveliness, QosReliability
 from rosbags.interfaces import QosTime as _QosTime
-from sensor_msgs.msg import CompressedImage, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from tqdm import tqdm
 
 from sepfm_ros.pipeline.pipeline import Pipeline
@@ -46,13 +47,17 @@ from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader, StampChecker
 from sepfm_ros.ros.bags.types import (
+    CAMERA_INFO,
     DIAGNOSTIC_ARRAY,
+    DIAGNOSTIC_STATUS,
     GROUND_TRUTH_TOPIC,
     IMAGE,
     POINTCLOUD2,
+    TRANSFORM_STAMPED,
     header_stamp_ns,
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
+from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import (
     copy_header,
@@ -61,9 +66,10 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
-from sepfm_ros.ros.parameters import PARAMS, parameter_error, pipeline_config
+from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
+    calibrated_topics,
     format_summary,
     format_table,
     output_topics,
@@ -175,6 +181,40 @@ def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: 
     return max(slop, steps[len(steps) // 2] // 2 - 1)
 
 
+@dataclass
+class CameraInfos:
+    """The bag's camera_info messages of each input camera, by stamp."""
+
+    topics: tuple[str, ...]
+    stamps: list[list[int]]
+    messages: list[list[Any]]
+
+    def at(self, stamp: int) -> list[Any]:
+        """The latest camera_info of each camera at ``stamp`` (ns; the first one before it)."""
+        out = []
+        for stamps, msgs in zip(self.stamps, self.messages, strict=True):
+            k = max(bisect.bisect_right(stamps, stamp) - 1, 0)
+            out.append(msgs[k])
+        return out
+
+
+def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
+    """The camera_info beside each input topic, when the bag has them all (else None)."""
+    topics = spec.camera_info_topics()
+    if not all(t in reader.topics and reader.topics[t].count for t in topics):
+        return None
+    for t in topics:
+        reader.require(t, (CAMERA_INFO,))
+    per_topic: dict[str, list[tuple[int, Any]]] = {t: [] for t in topics}
+    for raw in reader.messages(list(topics)):
+        msg = deserialize_message(raw.data, CameraInfo)
+        per_topic[raw.topic].append((stamp_ns(msg.header.stamp), msg))
+    ordered = [sorted(per_topic[t], key=lambda e: e[0]) for t in topics]
+    return CameraInfos(
+        topics, [[s for s, _ in o] for o in ordered], [[m for _, m in o] for o in ordered]
+    )
+
+
 def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> int:
     """How many pairs the bag should give (for the progress bar and success rates)."""
     counts = [reader.topics[t].count for t in spec.topics]
@@ -263,11 +303,31 @@ def run_process(
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
         pipeline = Pipeline(config, cache_size=8)
+        infos = read_camera_infos(reader, spec) if params["use_camera_info"] else None
+        calibrated = None
+        if infos is not None:
+            rectified = params["images"] == "rectified" or (
+                params["images"] == "auto" and spec.rectified()
+            )
+            calibrated = CalibratedStream(
+                spec.mode == "stereo", rectified, monitor_config(params), OUTPUT_NAMESPACE[1:]
+            )
+            print(
+                f"sepfm_ros process: camera_info from {' + '.join(infos.topics)}: F in "
+                "undistorted pixels of K, relative pose"
+                + (" and calibration check" if spec.mode == "stereo" else ""),
+                file=sys.stderr,
+                flush=True,
+            )
         done = 0
         with BagWriter(out, flush_interval_s=None) as writer:
             writer.add_topic(topics["fundamental"], IMAGE, (OUTPUT_QOS,))
             writer.add_topic(topics["matches"], POINTCLOUD2, (OUTPUT_QOS,))
             writer.add_topic(topics["estimate_info"], DIAGNOSTIC_ARRAY, (OUTPUT_QOS,))
+            if calibrated is not None:
+                topics = {**topics, **calibrated_topics(namespace)}
+                writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
+                writer.add_topic(topics["calibration_check"], DIAGNOSTIC_STATUS, (OUTPUT_QOS,))
             if has_gt:
                 writer.add_topic(GROUND_TRUTH_TOPIC, IMAGE, reader.topics[GROUND_TRUTH_TOPIC].qos)
                 for raw in reader.messages([GROUND_TRUTH_TOPIC]):
@@ -283,7 +343,10 @@ def run_process(
             )
             try:
                 for job in iter_pairs(reader, spec, params, slop_ns):
-                    for data in process_pair(pipeline, job, params, topics):
+                    calib = None
+                    if calibrated is not None:
+                        calib = (calibrated, infos.at(stamp_ns(job.header.stamp)))
+                    for data in process_pair(pipeline, job, params, topics, calib):
                         writer.write(data[0], stamp_ns(job.header.stamp), data[1])
                     writer.flush()  # every result survives a kill from now on
                     done += 1
@@ -296,9 +359,17 @@ def run_process(
 
 
 def process_pair(
-    pipeline: Pipeline, job: PairJob, params: dict[str, Any], topics: dict[str, str]
+    pipeline: Pipeline,
+    job: PairJob,
+    params: dict[str, Any],
+    topics: dict[str, str],
+    calibrated: tuple[CalibratedStream, list[Any]] | None = None,
 ) -> list[tuple[str, bytes]]:
-    """The node's outputs for one pair as (topic, CDR bytes); mirrors ``SepfmNode._process``."""
+    """The node's outputs for one pair as (topic, CDR bytes), as the node publishes them.
+
+    ``calibrated``: the stream's calibration and the pair's latest camera_info messages: F in
+    undistorted pixels, plus the relative transform and calibration check topics.
+    """
     t0 = time.perf_counter()
     try:
         image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
@@ -315,10 +386,31 @@ def process_pair(
             file=sys.stderr,
         )
         return []
-    result = pipeline.process(
+    cameras = None
+    out = []
+    if calibrated is not None:
+        stream, infos = calibrated
+        sizes = [image_a.shape[1::-1], image_b.shape[1::-1]]
+        update = stream.cameras(infos, sizes)
+        if update.error is not None:
+            print(f"\ncamera_info unusable: {update.reason}", file=sys.stderr)
+            out.append((topics["calibration_check"], serialize_message(update.error)))
+        cameras = update.cameras
+    matched = pipeline.match(
         image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
     )
-    out = []
+    result = pipeline.estimate(matched, cameras)
+    extra_values: dict[str, Any] = {}
+    if cameras is not None:
+        frames = stream.frames(job.msg_a.header.frame_id, job.msg_b.header.frame_id)
+        calibrated_msgs = stream.messages(result, params["threshold_px"], job.header, frames)
+        extra_values = calibrated_msgs.values
+        if calibrated_msgs.transform is not None:
+            data = serialize_message(calibrated_msgs.transform)
+            out.append((topics["relative_transform"], data))
+        if calibrated_msgs.status is not None:
+            data = serialize_message(calibrated_msgs.status)
+            out.append((topics["calibration_check"], data))
     if result.estimate.F is not None and (result.ok or params["publish_unreliable"]):
         out.append(
             (
@@ -334,6 +426,7 @@ def process_pair(
         job.msg_b.header.stamp,
         pipeline.config.features,
         node_name=OUTPUT_NAMESPACE,
+        extra_values=extra_values,
     )
     out.append((topics["estimate_info"], serialize_message(info)))
     return out

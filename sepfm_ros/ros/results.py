@@ -42,6 +42,15 @@ def output_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
     }
 
 
+def calibrated_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
+    """kind -> topic of the node's outputs with camera_info (pose and calibration check)."""
+    ns = namespace.rstrip("/")
+    return {
+        "relative_transform": f"{ns}/relative_transform",
+        "calibration_check": f"{ns}/calibration_check",
+    }
+
+
 def gt_error_px(F: np.ndarray, F_gt: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray) -> float:
     """Median symmetric epipolar distance (px) under F of the matches within 1 px of F_gt.
 

@@ -52,6 +52,16 @@ class InputSpec:
                 args += ["-r", f"{default.lstrip('/')}:={base}"]
         return args
 
+    def camera_info_topics(self) -> tuple[str, ...]:
+        """The ``camera_info`` beside each input image topic (image_transport's convention)."""
+        bases = [t.removesuffix(COMPRESSED_SUFFIX) if self.transport == "compressed" else t
+                 for t in self.topics]  # fmt: skip
+        return tuple(b.rsplit("/", 1)[0] + "/camera_info" for b in bases)
+
+    def rectified(self) -> bool:
+        """The images are rectified (``image_rect`` topics)."""
+        return all("rect" in t for t in self.topics)
+
     def describe(self) -> str:
         """One line for the user: mode and topics."""
         return f"{self.mode} from {' + '.join(self.topics)}"

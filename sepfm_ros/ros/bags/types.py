@@ -14,6 +14,9 @@ IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
+DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
+TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 IMAGE_TYPES = (IMAGE, COMPRESSED_IMAGE)
 
 GROUND_TRUTH_TOPIC = "/ground_truth/fundamental"

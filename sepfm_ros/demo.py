@@ -23,6 +23,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
+import numpy as np
 
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader
@@ -98,7 +99,7 @@ def replay_through_node(
     from sepfm_ros.ros.process import detect_inputs, expected_pairs, parse_params
     from sepfm_ros.ros.record import Recorder
     from sepfm_ros.ros.replay import Replayer
-    from sepfm_ros.ros.results import output_topics
+    from sepfm_ros.ros.results import calibrated_topics, output_topics
 
     params = list(params or [])
     check_output_path(out)
@@ -115,7 +116,7 @@ def replay_through_node(
     node = rclpy.create_node(f"sepfm_demo_{os.getpid()}", context=context)
     executor = SingleThreadedExecutor(context=context)
     executor.add_node(node)
-    topics = list(output_topics().values())
+    topics = list(output_topics().values()) + list(calibrated_topics().values())
     if debug_image:
         topics.append("/sepfm/debug_image")
     writer = BagWriter(out, flush_interval_s=1.0)
@@ -141,7 +142,10 @@ def replay_through_node(
     replayer = None
     published = 0
     try:
-        replayer = Replayer(node, bag, topics=spec.topics, rate=rate)
+        # the images and, where the bag has them, their camera_info (calibrated outputs)
+        with BagReader(bag) as reader:
+            infos = [t for t in spec.camera_info_topics() if t in reader.topics]
+        replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate)
         deadline = time.monotonic() + startup_timeout_s
         while not recorder.ready():
             if node_proc.poll() is not None:
@@ -210,6 +214,39 @@ def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
     return bool(cv2.imwrite(str(path), message_to_numpy(best[1], "bgr8")))
 
 
+def calibration_summary(live_bag: Path, results: list) -> str | None:
+    """One line on the calibrated outputs (camera_info in the bag): the median relative pose
+    of the answered pairs and the node's last calibration check; None without them."""
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from rclpy.serialization import deserialize_message
+
+    from sepfm_ros.ros.results import calibrated_topics
+
+    poses = [r.info for r in results if r.info and r.info.get("pose_status") == "ok"]
+    if not poses:
+        return None
+    rotation = float(np.median([float(v["rotation_deg"]) for v in poses]))
+    direction = np.median(
+        [[float(x) for x in v["translation_direction"].split()] for v in poses], axis=0
+    )
+    line = (
+        f"relative pose (camera_info): {len(poses)} pairs, median rotation {rotation:.2f} deg,"
+        f" translation direction {np.round(direction, 3).tolist()}"
+    )
+    if poses[-1].get("baseline_m"):
+        line += f", baseline {float(poses[-1]['baseline_m']):.3f} m"
+    topic = calibrated_topics()["calibration_check"]
+    with BagReader(live_bag) as reader:
+        if topic in reader.topics:
+            last = None
+            for raw in reader.messages([topic]):
+                last = deserialize_message(raw.data, DiagnosticStatus)
+            if last is not None:
+                level = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}[last.level[0]]
+                line += f"; calibration check {level}: {last.message}"
+    return line
+
+
 def main(argv: list[str]) -> int:
     parser = argparse.ArgumentParser(
         prog="sepfm_ros demo",
@@ -254,6 +291,9 @@ def main(argv: list[str]) -> int:
         return 1
     print(format_table(results))
     print(format_summary(summarize(results, run.expected_pairs)))
+    calibrated = calibration_summary(run.output, results)
+    if calibrated:
+        print(calibrated)
     if results:
         ranked = sorted(results, key=lambda r: r.inliers)
         pick = ranked[len(ranked) // 2]

@@ -302,7 +302,9 @@ def write_plot(rows: list[PairRow], path: Path, config: MonitorConfig) -> None:
     axes[1].axhline(config.warn_rotation_deg, color="orange", ls="--", lw=1)
     axes[1].axhline(config.error_rotation_deg, color="red", ls="--", lw=1)
     axes[1].set_ylabel("rotation vs calibration (deg)")
-    axes[1].set_xlabel("time (s); background: decision (green OK, yellow WARN, red ERROR)")
+    axes[1].set_xlabel(
+        "time (s); background: decision (green OK, yellow WARN, red ERROR, grey STALE)"
+    )
     axes[0].set_title(f"stereo calibration check: {rows[-1].status.level_name}")
     fig.tight_layout()
     fig.savefig(path, dpi=110)

@@ -21,6 +21,7 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "record": ("sepfm_ros.ros.record", "main", "record topics into a bag"),
     "process": ("sepfm_ros.ros.process", "main", "run the pipeline over a bag offline"),
     "eval": ("sepfm_ros.evaluation.cli", "main", "evaluate estimators on pairs with ground truth"),
+    "calibration_check": ("sepfm_ros.ros.calibration_check", "main", "check a stereo calibration"),
 }
 
 

@@ -24,7 +24,7 @@ import sys
 import time
 from pathlib import Path
 
-from sepfm_ros.evaluation.manifest import ManifestError, PairSpec, load_manifest
+from sepfm_ros.evaluation.manifest import ManifestError, PairSpec, load_cameras, load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.methods import REGISTRY, available_methods, resolve_methods
 from sepfm_ros.evaluation.report import update_readme, write_report
@@ -73,6 +73,13 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         default=None,
         help="folder the manifest's image paths are relative to (default: its folder)",
+    )
+    p.add_argument(
+        "--cameras",
+        type=Path,
+        default=None,
+        help="JSON of GT 3x4 cameras by image path, for relative-pose errors "
+        "(default: cameras.json beside the manifest, when there is one)",
     )
     p.add_argument(
         "--out", type=Path, default=Path("eval_report"), help="report folder (default: eval_report)"
@@ -160,10 +167,14 @@ def main(argv: list[str]) -> int:
     if args.manifest is None and not args.bags:
         parser.error("give --manifest and/or --bags")
     cache_dir = None if str(args.cache).lower() == "none" else args.cache
-    pairs, errors = [], []
+    pairs, errors, cameras = [], [], {}
     if args.manifest is not None:
         try:
             pairs, errors = load_manifest(args.manifest, args.root)
+            cameras = load_cameras(
+                args.cameras or Path(args.manifest).parent / "cameras.json",
+                args.root or Path(args.manifest).parent,
+            )
         except ManifestError as exc:
             print(f"sepfm_ros eval: {exc}", file=sys.stderr)
             return 2
@@ -195,7 +206,9 @@ def main(argv: list[str]) -> int:
             bar.set_postfix_str(pair_id, refresh=False)
             bar.update(steps)
 
-        res = evaluate(pairs, methods, cache, config, errors=errors, progress=progress)
+        res = evaluate(
+            pairs, methods, cache, config, errors=errors, progress=progress, cameras=cameras
+        )
     elapsed = time.perf_counter() - t0
     command = "sepfm_ros eval " + shlex.join(argv)
     n_runs = len(res.runs)

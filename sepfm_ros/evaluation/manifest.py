@@ -210,3 +210,31 @@ def load_manifest(
             seen[spec.pair_id] = 0
         pairs.append(spec)
     return pairs, errors
+
+
+def load_cameras(path: str | Path, root: str | Path | None = None) -> dict[Path, np.ndarray]:
+    """Ground-truth 3x4 cameras of images, keyed by image path (resolved like the manifest's).
+
+    Reads ``path`` (a JSON object: image path -> 3x4 P = K [R | t], as the shared data's
+    ``cameras.json``); entries that are not 3x4 finite numbers are left out. A missing file gives
+    an empty dict: cameras are optional.
+    """
+    path = Path(path)
+    if not path.is_file():
+        return {}
+    try:
+        data = json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError) as exc:
+        raise ManifestError(f"cannot read cameras {path}: {exc}") from None
+    if not isinstance(data, dict):
+        raise ManifestError(f"cameras file {path} must hold a JSON object")
+    base = Path(root) if root is not None else path.parent
+    out = {}
+    for key, value in data.items():
+        try:
+            P = np.asarray(value, dtype=np.float64)
+        except (TypeError, ValueError):
+            continue
+        if P.shape == (3, 4) and np.all(np.isfinite(P)):
+            out[(base / key).resolve()] = P
+    return out

@@ -333,3 +333,51 @@ def line_homography_error(
 def outlier_rate(n_positives: int, n_matches: int) -> float:
     """1 - positives / matches: the pair's outlier rate r as the GT sees it (nan for 0 matches)."""
     return 1.0 - n_positives / n_matches if n_matches else math.nan
+
+
+# A run without an F or a pose counts as this rotation / direction error (degrees).
+POSE_FAILURE_DEG = 180.0
+
+
+def pose_errors(
+    F: np.ndarray | None,
+    pts_a: np.ndarray,
+    pts_b: np.ndarray,
+    P_a: np.ndarray,
+    P_b: np.ndarray,
+    threshold: float,
+) -> tuple[float, float]:
+    """Rotation and translation-direction errors (degrees) of the pose from F vs GT cameras.
+
+    The pose is :func:`sepfm_ros.geometry.pose.relative_pose` of F on its inliers (symmetric
+    epipolar distance < ``threshold``) with the GT intrinsics; the reference is the relative
+    pose of the 3x4 GT cameras P_a, P_b. ``POSE_FAILURE_DEG`` for both without F or pose.
+    """
+    from sepfm_ros.geometry.pose import (
+        direction_error_deg,
+        pose_from_projections,
+        relative_pose,
+        rotation_error_deg,
+    )
+
+    if F is None:
+        return POSE_FAILURE_DEG, POSE_FAILURE_DEG
+    K_a, K_b, R_gt, t_gt = pose_from_projections(P_a, P_b)
+    inl = inlier_mask(F, pts_a, pts_b, threshold)
+    pose = relative_pose(F, pts_a, pts_b, K_a, K_b, inl, scale_px=threshold)
+    if not pose.ok or not np.linalg.norm(t_gt) > 0:
+        return POSE_FAILURE_DEG, POSE_FAILURE_DEG
+    return rotation_error_deg(pose.R, R_gt), direction_error_deg(pose.t, t_gt)
+
+
+def pose_summary(runs: list[dict]) -> tuple[int, float, float]:
+    """(pairs, median rotation error, median translation-direction error) over runs with pose
+    errors (records with ``rotation_error_deg`` not None); (0, nan, nan) without any."""
+    rows = [r for r in runs if r.get("rotation_error_deg") is not None]
+    if not rows:
+        return 0, math.nan, math.nan
+    return (
+        len({r["pair"] for r in rows}),
+        float(np.median([r["rotation_error_deg"] for r in rows])),
+        float(np.median([r["translation_error_deg"] for r in rows])),
+    )

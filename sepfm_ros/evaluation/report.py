@@ -79,6 +79,22 @@ def accuracy_table(rows: list[metrics.Summary]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
+def pose_table(res: EvalResults) -> str:
+    """Markdown table of relative-pose errors per method (pairs with GT cameras), or ""."""
+    lines = []
+    for method in res.methods:
+        n, rot, tdir = metrics.pose_summary([r for r in res.runs if r["method"] == method])
+        if n:
+            lines.append(f"| {method} | {_fmt(rot, 3)} | {_fmt(tdir, 2)} | {n} |")
+    if not lines:
+        return ""
+    head = (
+        "| method | median rotation err (deg) | median translation-direction err (deg) "
+        "| pairs |\n|---|---:|---:|---:|\n"
+    )
+    return head + "\n".join(lines) + "\n"
+
+
 def failure_table(res: EvalResults, rows: list[metrics.Summary]) -> str:
     """The paper's Table 5 for our data: hypotheses and failures, overall and relative to the
     baseline (runs that fail where the baseline, same pair and seed, does not)."""
@@ -444,6 +460,18 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
     methods_desc = [f"- `{m}`: {REGISTRY[m].description}" for m in res.methods if m in REGISTRY]
     md += ["## Methods", "", *methods_desc, ""]
     md += ["## Overall (paper's Tables 2-4 layout)", "", accuracy_table(sums[OVERALL])]
+    poses = pose_table(res)
+    if poses:
+        md += [
+            "## Relative pose (pairs with GT cameras)",
+            "",
+            "Each run's F, its inliers and the GT intrinsics give a pose "
+            "(`sepfm_ros.geometry.pose.relative_pose`); errors against the GT cameras' relative "
+            f"pose, median over runs; a run without F or pose counts as "
+            f"{metrics.POSE_FAILURE_DEG:.0f} deg.",
+            "",
+            poses,
+        ]
     md += ["## Hypotheses and failures (paper's Table 5 layout)", ""]
     md += [failure_table(res, sums[OVERALL])]
     if comps:

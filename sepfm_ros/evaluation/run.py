@@ -10,8 +10,9 @@ from __future__ import annotations
 import math
 import signal
 import threading
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -92,6 +93,7 @@ def _evaluate_pair(
     methods: Sequence[Method],
     cache: MatchesCache,
     progress: Callable[[int, str], None] | None,
+    cameras: Mapping[Path, np.ndarray] | None = None,
 ) -> None:
     """Match one pair and run every method x seed on it, appending to ``res``."""
     cfg = res.config
@@ -130,6 +132,10 @@ def _evaluate_pair(
             "cached": pm.from_cache,
         }
     )
+    gt_cams = None
+    if cameras and pair.img_a is not None and pair.img_b is not None:
+        P_a, P_b = cameras.get(pair.img_a.resolve()), cameras.get(pair.img_b.resolve())
+        gt_cams = (P_a, P_b) if P_a is not None and P_b is not None else None
     for method in methods:
         for seed in cfg.seeds:
             r = _safe_run(method, pm.pts_a, pm.pts_b, pm.size_a, size_b, cfg, seed)
@@ -137,6 +143,12 @@ def _evaluate_pair(
             rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
             rec["seed"] = seed
             rec.update(asdict(m))
+            rot_err = dir_err = None
+            if gt_cams is not None:
+                rot_err, dir_err = metrics.pose_errors(
+                    r.F, pm.pts_a, pm.pts_b, *gt_cams, cfg.threshold
+                )
+            rec.update(rotation_error_deg=rot_err, translation_error_deg=dir_err)
             rec.update(
                 has_model=r.F is not None,
                 hypotheses=r.hypotheses,
@@ -169,6 +181,7 @@ def evaluate(
     config: EvalConfig | None = None,
     errors: Sequence[PairError] = (),
     progress: Callable[[int, str], None] | None = None,
+    cameras: Mapping[Path, np.ndarray] | None = None,
 ) -> EvalResults:
     """Evaluate ``methods`` on ``pairs``.
 
@@ -180,6 +193,9 @@ def evaluate(
         errors: pair errors found while loading, carried into the results.
         progress: called with (steps done since last call, current pair id); one step per run,
             len(pairs) * len(methods) * len(seeds) in all.
+        cameras: GT 3x4 cameras by resolved image path (``manifest.load_cameras``); pairs
+            whose two images have one get the relative-pose errors of every run
+            (``rotation_error_deg``, ``translation_error_deg``; None otherwise).
     """
     cfg = config or EvalConfig()
     res = EvalResults(config=cfg, methods=[m.name for m in methods], errors=list(errors))
@@ -193,7 +209,7 @@ def evaluate(
         for pair in pairs:
             if stop.is_set():
                 raise KeyboardInterrupt
-            _evaluate_pair(res, pair, methods, cache, progress)
+            _evaluate_pair(res, pair, methods, cache, progress, cameras)
     except KeyboardInterrupt:
         # keep whole pairs only: drop the runs of the pair that was interrupted
         res.interrupted = True

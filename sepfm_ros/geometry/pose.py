@@ -174,6 +174,7 @@ def relative_pose(
     inliers: np.ndarray | None = None,
     refine: bool = True,
     scale_px: float = 1.0,
+    reselect: int = 2,
 ) -> RelativePose:
     """Relative pose of camera b w.r.t. camera a from F and the intrinsics.
 
@@ -186,7 +187,10 @@ def relative_pose(
         pts_a, pts_b: (N, 2) matches in undistorted pixels of K_a / K_b.
         K_a, K_b: (3, 3) intrinsics of those pixels.
         inliers: (N,) bool mask of F's inliers (all when None).
-        scale_px: soft-L1 scale of the refinement (px), e.g. the estimator's threshold.
+        scale_px: soft-L1 scale of the refinement (px), e.g. the estimator's threshold; also
+            the Sampson distance under which a match is re-selected as an inlier of the pose.
+        reselect: rounds of re-selecting the inliers among all matches under the refined pose
+            and refitting (0: refine on F's inliers only).
     Returns:
         A :class:`RelativePose` with unit t; status says why when no pose was found.
     """
@@ -212,6 +216,17 @@ def relative_pose(
         )
     if refine:
         R, t = refine_pose(R, t, pa[front], pb[front], K_a, K_b, scale_px)
+        # the essential model (5 dof) is stricter than F (7 dof): re-select the inliers of all
+        # matches under it (Sampson distance within scale_px, in front) and refit, twice
+        xa, xb = homogeneous(pts_a), homogeneous(pts_b)
+        Ka_inv, Kb_inv = np.linalg.inv(K_a), np.linalg.inv(K_b)
+        all_na, all_nb = normalized_points(K_a, pts_a), normalized_points(K_b, pts_b)
+        for _ in range(reselect):
+            d = np.abs(_sampson_residuals(R, t, xa, xb, Ka_inv, Kb_inv))
+            sel = (d < scale_px) & in_front_mask(R, t, all_na, all_nb)
+            if np.count_nonzero(sel) < MIN_POSE_POINTS:
+                break
+            R, t = refine_pose(R, t, pts_a[sel], pts_b[sel], K_a, K_b, scale_px)
         front = in_front_mask(R, t, na, nb)
     return RelativePose(R, t / np.linalg.norm(t), float(front.mean()), n)
 

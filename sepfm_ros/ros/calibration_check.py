@@ -1,0 +1,337 @@
+"""``sepfm_ros calibration_check BAG``: is a stereo rig still calibrated? Offline, from a bag.
+
+For every stereo pair in the bag (left and right images with equal header stamps), matches the
+images with the node's pipeline (estimated in undistorted pixels of K, or rectified pixels),
+measures the inlier matches against the calibration from the bag's ``camera_info`` topics
+(:mod:`sepfm_ros.geometry.calibration_check`) and runs the same sliding-window monitor as the
+node. Prints one line per pair and the decision; writes ``calibration_check.png`` (error over
+time) and ``calibration_check.csv`` into ``--out``.
+
+Exit code: 0 when the final decision is OK, 1 when WARN, ERROR or not enough usable pairs
+(STALE), 2 on bad input (no such bag or topic, no camera_info, unusable calibration).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sepfm_ros.geometry.calibration_check import (
+    LEVEL_NAMES,
+    OK,
+    CalibrationMonitor,
+    CalibrationStatus,
+    MonitorConfig,
+    PairCheck,
+    StereoCalibration,
+    check_pair,
+)
+from sepfm_ros.geometry.camera import CalibrationError
+from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+from sepfm_ros.ros.bag_io import BagError, BagReader, format_stamp
+from sepfm_ros.ros.calibration_msgs import camera_model_from_info
+from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+
+IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+
+
+def info_topic_for(image_topic: str) -> str:
+    """The camera_info topic beside an image topic: ``/left/image_raw`` -> ``/left/camera_info``."""
+    base = image_topic.removesuffix("/compressed")
+    parent = base.rsplit("/", 1)[0] if "/" in base.strip("/") else ""
+    return f"{parent}/camera_info"
+
+
+@dataclass
+class PairRow:
+    """One checked pair: its stamp, figures and the monitor's decision after it."""
+
+    index: int
+    stamp_ns: int
+    check: PairCheck
+    status: CalibrationStatus
+
+
+def _parse(argv: list[str]) -> argparse.Namespace:
+    d = MonitorConfig()
+    p = argparse.ArgumentParser(
+        prog="sepfm_ros calibration_check",
+        description="Check a stereo rig's calibration (camera_info) against its images in a bag.",
+    )
+    p.add_argument("bag", help="rosbag2 directory or .mcap/.db3 file")
+    p.add_argument("--left", default="/left/image_raw", help="left image topic")
+    p.add_argument("--right", default="/right/image_raw", help="right image topic")
+    p.add_argument("--left-info", help="left camera_info topic (default: beside --left)")
+    p.add_argument("--right-info", help="right camera_info topic (default: beside --right)")
+    p.add_argument(
+        "--rectified",
+        choices=("auto", "yes", "no"),
+        default="auto",
+        help="images are rectified (image_rect); auto: when the topic names say image_rect",
+    )
+    p.add_argument("--out", default="calibration_check", help="folder for the PNG and CSV")
+    p.add_argument("--window", type=int, default=d.window, help="pairs in the sliding window")
+    p.add_argument("--min-pairs", type=int, default=d.min_pairs, help="usable pairs to decide")
+    p.add_argument("--min-inliers", type=int, default=d.min_inliers, help="inliers per pair")
+    p.add_argument("--warn-epipolar-px", type=float, default=d.warn_epipolar_px)
+    p.add_argument("--error-epipolar-px", type=float, default=d.error_epipolar_px)
+    p.add_argument("--warn-rotation-deg", type=float, default=d.warn_rotation_deg)
+    p.add_argument("--error-rotation-deg", type=float, default=d.error_rotation_deg)
+    p.add_argument("--max-pairs", type=int, default=0, help="stop after this many pairs (0: all)")
+    return p.parse_args(argv)
+
+
+def _monitor_config(args: argparse.Namespace) -> MonitorConfig:
+    return MonitorConfig(
+        window=args.window,
+        min_pairs=args.min_pairs,
+        min_inliers=args.min_inliers,
+        warn_epipolar_px=args.warn_epipolar_px,
+        error_epipolar_px=args.error_epipolar_px,
+        warn_rotation_deg=args.warn_rotation_deg,
+        error_rotation_deg=args.error_rotation_deg,
+    )
+
+
+def _stamp(msg: Any) -> int:
+    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
+
+
+class _Rig:
+    """The latest calibration of each side, rebuilt when a camera_info changes."""
+
+    def __init__(self, rectified: bool) -> None:
+        self.rectified = rectified
+        self.infos: dict[str, Any] = {}
+        self._key: tuple | None = None
+        self.calib: StereoCalibration | None = None
+
+    def calibration(self, size: tuple[int, int]) -> StereoCalibration:
+        left, right = self.infos.get("left"), self.infos.get("right")
+        if left is None or right is None:
+            raise CalibrationError(
+                "no camera_info received yet for " + ("left" if left is None else "right")
+            )
+        key = tuple(
+            (tuple(np.ravel(m.k)), tuple(np.ravel(m.d)), tuple(np.ravel(m.r)), tuple(np.ravel(m.p)))
+            for m in (left, right)
+        ) + (size,)
+        if key != self._key:
+            ma = camera_model_from_info(left, size)
+            mb = camera_model_from_info(right, size)
+            self.calib = StereoCalibration.from_models(ma, mb, self.rectified)
+            self._key = key
+        assert self.calib is not None
+        return self.calib
+
+
+def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
+    """Check every stereo pair of the bag; print progress and figures. Raises BagError,
+    CalibrationError or ValueError on bad input."""
+    left_info = args.left_info or info_topic_for(args.left)
+    right_info = args.right_info or info_topic_for(args.right)
+    rectified = (
+        args.rectified == "yes"
+        or args.rectified == "auto"
+        and "image_rect" in args.left + args.right
+    )
+    monitor = CalibrationMonitor(_monitor_config(args))
+    pipeline = Pipeline(PipelineConfig())
+    rows: list[PairRow] = []
+    with BagReader(args.bag) as reader:
+        for topic in (args.left, args.right):
+            reader.require(topic, IMAGE_TYPES)
+        for topic in (left_info, right_info):
+            if topic not in reader.topics:
+                have = ", ".join(
+                    t for t, i in sorted(reader.topics.items()) if i.msgtype == CAMERA_INFO
+                )
+                raise CalibrationError(
+                    f"bag {args.bag} has no camera_info on {topic}: a calibration check needs "
+                    f"both cameras' camera_info (camera_info topics in the bag: "
+                    f"{have or 'none'}; choose them with --left-info/--right-info)"
+                )
+            reader.require(topic, (CAMERA_INFO,))
+        total = min(reader.topics[args.left].count, reader.topics[args.right].count)
+        if args.max_pairs:
+            total = min(total, args.max_pairs)
+        side_of = {args.left: "left", args.right: "right", left_info: "left", right_info: "right"}
+        rig = _Rig(rectified)
+        pending: dict[str, dict[int, Any]] = {"left": {}, "right": {}}
+        print(
+            f"checking {total} stereo pairs of {args.bag} ({'rectified' if rectified else 'raw'}"
+            f" images, calibration from {left_info} and {right_info})",
+            file=out,
+        )
+        ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
+        for raw in reader.messages([args.left, args.right, left_info, right_info]):
+            msg = reader.deserialize(raw)
+            side = side_of[raw.topic]
+            if raw.topic in (left_info, right_info):
+                rig.infos[side] = msg
+            else:
+                stamp = _stamp(msg)
+                other = pending["right" if side == "left" else "left"]
+                if stamp in other:
+                    mate = other.pop(stamp)
+                    ready.append((stamp, *((msg, mate) if side == "left" else (mate, msg))))
+                else:
+                    pending[side][stamp] = msg
+                    for old in sorted(pending[side])[:-8]:  # keep recent unmatched images only
+                        del pending[side][old]
+            while (
+                ready
+                and len(rig.infos) == 2
+                and not (args.max_pairs and len(rows) >= args.max_pairs)
+            ):
+                stamp, msg_l, msg_r = ready.pop(0)
+                row = _check_one(rig, pipeline, monitor, stamp, msg_l, msg_r, len(rows), out)
+                if row is not None:
+                    rows.append(row)
+                    print(_row_line(row, total), file=out, flush=True)
+            if args.max_pairs and len(rows) >= args.max_pairs:
+                break
+        if ready:
+            missing = [s for s in ("left", "right") if s not in rig.infos]
+            topics = [left_info if s == "left" else right_info for s in missing]
+            raise CalibrationError(f"no camera_info message on {', '.join(topics)} in the bag")
+    return rows
+
+
+def _check_one(
+    rig: _Rig,
+    pipeline: Pipeline,
+    monitor: CalibrationMonitor,
+    stamp: int,
+    msg_l: Any,
+    msg_r: Any,
+    index: int,
+    out,
+) -> PairRow | None:
+    """Check one stereo pair; None (with a printed reason) when its images cannot be decoded."""
+    try:
+        img_l = message_to_numpy(msg_l, "mono8")
+        img_r = message_to_numpy(msg_r, "mono8")
+    except ImageDecodeError as err:
+        print(f"pair at {format_stamp(stamp)}: skipped, {err}", file=out)
+        return None
+    calib = rig.calibration((int(img_l.shape[1]), int(img_l.shape[0])))
+    result = pipeline.process(img_l, img_r, cameras=(calib.model_a, calib.model_b))
+    check = check_pair(
+        calib,
+        result.matches.pts_a,
+        result.matches.pts_b,
+        result.estimate.inliers,
+        monitor.config.min_inliers,
+        pipeline.config.threshold_px,
+    )
+    return PairRow(index, stamp, check, monitor.update(check))
+
+
+def _row_line(row: PairRow, total: int) -> str:
+    c = row.check
+    figures = (
+        f"inliers {c.n_inliers:4d}  epipolar median {c.epipolar_median_px:5.2f} px  "
+        f"p90 {c.epipolar_p90_px:5.2f} px  rotation {c.rotation_error_deg:6.3f} deg"
+        if c.usable
+        else f"inliers {c.n_inliers:4d}  (too few to measure)"
+    )
+    return (
+        f"[{row.index + 1}/{total}] {format_stamp(row.stamp_ns)}  {figures}  "
+        f"-> {row.status.level_name}"
+    )
+
+
+def write_csv(rows: list[PairRow], path: Path) -> None:
+    """One line per pair: figures and the decision after it."""
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(
+            [
+                "pair",
+                "stamp_ns",
+                "inliers",
+                "epipolar_median_px",
+                "epipolar_p90_px",
+                "rotation_error_deg",
+                "rotation_x_deg",
+                "rotation_y_deg",
+                "rotation_z_deg",
+                "level",
+            ]
+        )
+        for r in rows:
+            c = r.check
+            w.writerow(
+                [r.index, r.stamp_ns, c.n_inliers, c.epipolar_median_px, c.epipolar_p90_px]
+                + [c.rotation_error_deg, *c.rotation_axes_deg.tolist(), r.status.level_name]
+            )
+
+
+def write_plot(rows: list[PairRow], path: Path, config: MonitorConfig) -> None:
+    """PNG of the per-pair epipolar error and rotation over time, thresholds and decisions."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = np.array([(r.stamp_ns - rows[0].stamp_ns) / 1e9 for r in rows])
+    epi = np.array([r.check.epipolar_median_px for r in rows])
+    p90 = np.array([r.check.epipolar_p90_px for r in rows])
+    rot = np.array([r.check.rotation_error_deg for r in rows])
+    colors = {0: "#d8f0d8", 1: "#fbe7b5", 2: "#f6c6c6", 3: "#eeeeee"}
+    fig, axes = plt.subplots(2, 1, sharex=True, figsize=(9, 5.5))
+    for ax in axes:
+        for k, r in enumerate(rows):
+            t1 = t[k + 1] if k + 1 < len(t) else t[k] + (t[k] - t[k - 1] if k else 1.0)
+            ax.axvspan(t[k], t1, color=colors[r.status.level], lw=0)
+    axes[0].plot(t, epi, "o-", ms=3, label="median")
+    axes[0].plot(t, p90, ".", ms=3, alpha=0.6, label="90th percentile")
+    axes[0].axhline(config.warn_epipolar_px, color="orange", ls="--", lw=1, label="WARN")
+    axes[0].axhline(config.error_epipolar_px, color="red", ls="--", lw=1, label="ERROR")
+    axes[0].set_ylabel("epipolar error (px)")
+    axes[0].legend(fontsize=8, loc="upper left")
+    axes[1].plot(t, rot, "o-", ms=3, color="C2")
+    axes[1].axhline(config.warn_rotation_deg, color="orange", ls="--", lw=1)
+    axes[1].axhline(config.error_rotation_deg, color="red", ls="--", lw=1)
+    axes[1].set_ylabel("rotation vs calibration (deg)")
+    axes[1].set_xlabel(
+        "time (s); background: decision (green OK, yellow WARN, red ERROR, grey STALE)"
+    )
+    axes[0].set_title(f"stereo calibration check: {rows[-1].status.level_name}")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def main(argv: list[str]) -> int:
+    args = _parse(argv)
+    try:
+        rows = run_check(args)
+    except (BagError, CalibrationError, ValueError) as err:
+        print(f"calibration_check: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("calibration_check: interrupted", file=sys.stderr)
+        return 130
+    if not rows:
+        print(
+            f"calibration_check: no stereo pairs (equal stamps on {args.left} and {args.right})",
+            file=sys.stderr,
+        )
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_csv(rows, out / "calibration_check.csv")
+    write_plot(rows, out / "calibration_check.png", _monitor_config(args))
+    final = rows[-1].status
+    print(f"decision: {LEVEL_NAMES[final.level]}: {final.message}")
+    print(f"wrote {out / 'calibration_check.png'} and {out / 'calibration_check.csv'}")
+    return 0 if final.level == OK else 1

@@ -1,0 +1,116 @@
+"""`sepfm_ros calibration_check BAG` on real bags: KITTI stereo, clean and decalibrated."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import CameraInfo
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry.pose import pose_from_projections
+from sepfm_ros.ros.bag_io import RawMessage, write_bag
+from sepfm_ros.ros.image_conversion import numpy_to_image
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
+FRAMES = 12
+IMAGE = "sensor_msgs/msg/Image"
+INFO = "sensor_msgs/msg/CameraInfo"
+
+
+def _infos(shared_data) -> tuple[CameraInfo, CameraInfo]:
+    """CameraInfo of KITTI's rectified left and right cameras (rig frame = left camera)."""
+    cams = json.loads((shared_data / "cameras.json").read_text())
+    K_a, K_b, _, t = pose_from_projections(
+        np.array(cams["kitti_seq2/left/000000.png"]), np.array(cams["kitti_seq2/right/000000.png"])
+    )
+    out = []
+    for K, P in ((K_a, K_a @ np.eye(3, 4)), (K_b, K_b @ np.c_[np.eye(3), t])):
+        msg = CameraInfo(width=1241, height=376, distortion_model="plumb_bob", d=[0.0] * 5)
+        msg.k = K.ravel().tolist()
+        msg.r = np.eye(3).ravel().tolist()
+        msg.p = P.ravel().tolist()
+        out.append(msg)
+    return out[0], out[1]
+
+
+def _write_kitti_bag(shared_data, path, rotation_deg=(0.0, 0.0, 0.0), with_info=True) -> None:
+    info_l, info_r = _infos(shared_data)
+    K = np.reshape(info_r.k, (3, 3))
+    H = K @ cv2.Rodrigues(np.radians(rotation_deg))[0] @ np.linalg.inv(K)
+    msgs = []
+    for k in range(FRAMES):
+        stamp = 1_000_000_000 + k * 100_000_000
+        for side, info, frame in (
+            ("left", info_l, "left_camera_optical_frame"),
+            ("right", info_r, "right_camera_optical_frame"),
+        ):
+            img = cv2.imread(
+                str(shared_data / f"kitti_seq2/{side}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE
+            )
+            if side == "right":
+                img = cv2.warpPerspective(img, H, (img.shape[1], img.shape[0]))
+            header = Header(frame_id=frame)
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            msg = numpy_to_image(img, "mono8", header)
+            msgs.append(RawMessage(f"/{side}/image_raw", IMAGE, stamp, serialize_message(msg)))
+            if with_info:
+                info.header = header
+                msgs.append(
+                    RawMessage(f"/{side}/camera_info", INFO, stamp, serialize_message(info))
+                )
+    write_bag(path, msgs)
+
+
+def _run(bag, out, *extra):
+    return subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", "calibration_check", str(bag), "--out", str(out)]
+        + list(extra),
+        cwd=REPO_ROOT,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+
+
+def _levels(out) -> list[str]:
+    with (out / "calibration_check.csv").open() as f:
+        return [row["level"] for row in csv.DictReader(f)]
+
+
+@pytest.mark.parametrize(
+    ("rotation", "expect_ok"), [((0.0, 0.0, 0.0), True), ((0.5, 0.0, 0.0), False)]
+)
+def test_clean_ok_and_rotated_warns(shared_data, tmp_path, rotation, expect_ok):
+    bag = tmp_path / "kitti"
+    _write_kitti_bag(shared_data, bag, rotation)
+    out = tmp_path / "out"
+    r = _run(bag, out)
+    assert r.returncode == (0 if expect_ok else 1), r.stdout + r.stderr
+    assert f"[{FRAMES}/{FRAMES}]" in r.stdout  # progress, one line per pair
+    levels = _levels(out)
+    assert len(levels) == FRAMES
+    decided = [lv for lv in levels if lv != "STALE"]
+    assert decided
+    if expect_ok:
+        assert set(decided) == {"OK"} and "decision: OK" in r.stdout
+    else:
+        assert set(decided) <= {"WARN", "ERROR"} and "decision: OK" not in r.stdout
+    png = out / "calibration_check.png"
+    assert png.stat().st_size > 10_000 and png.read_bytes()[:4] == b"\x89PNG"
+
+
+def test_bag_without_camera_info_clear_error(shared_data, tmp_path):
+    bag = tmp_path / "noinfo"
+    _write_kitti_bag(shared_data, bag, with_info=False)
+    r = _run(bag, tmp_path / "out")
+    assert r.returncode == 2
+    assert "no camera_info on /left/camera_info" in r.stderr
+    assert not (tmp_path / "out").exists()

@@ -9,6 +9,7 @@ layout (``make_bag``).
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -18,6 +19,9 @@ import numpy as np
 import pytest
 from robot_bags import FORMATS, LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag
 
+from sepfm_ros.evaluation import cli
+from sepfm_ros.evaluation.bags import load_bag_pairs
+from sepfm_ros.geometry import fundamental_from_cameras
 from sepfm_ros.ros.bags.errors import TopicNotFoundError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
@@ -181,3 +185,32 @@ def test_ambiguous_image_topics_give_a_clear_error(kitti_frames, tmp_path):
             detect_inputs(reader, mode="motion")
         with pytest.raises(TopicNotFoundError, match="/nope is not in bag"):
             detect_inputs(reader, left="/nope", right=RIGHT_TOPIC)
+
+
+def test_eval_bags_takes_the_topic_flags(kitti_frames, shared_data, tmp_path):
+    cams = json.loads((shared_data / "cameras.json").read_text())
+    gt = [
+        fundamental_from_cameras(
+            np.array(cams[f"kitti_seq2/left/{i:06d}.png"]),
+            np.array(cams[f"kitti_seq2/right/{i:06d}.png"]),
+        )
+        for i in range(N_PAIRS)
+    ]
+    bag = write_robot_bag(
+        bag_path(tmp_path, "ros1"),
+        "ros1",
+        kitti_frames,
+        right_lag_ns=LAG_NS,
+        extra_image_topics=["/camera/center/image_raw"],
+        ground_truth=[g / np.linalg.norm(g) for g in gt],
+    )
+    # three cameras: no pick, one error for the bag naming the flags
+    pairs, errors = load_bag_pairs(bag, tmp_path / "frames")
+    assert pairs == [] and len(errors) == 1 and "--left TOPIC --right TOPIC" in errors[0].message
+    out = tmp_path / "out"
+    argv = ["--bags", str(bag), "--left", LEFT_TOPIC, "--right", RIGHT_TOPIC, "--out", str(out),
+            "--cache", str(tmp_path / "cache"), "--methods", "cv-ransac", "--seeds", "0",
+            "--no-progress"]  # fmt: skip
+    assert cli.main(argv) == 0
+    rows = (out / "runs.csv").read_text().splitlines()[1:]
+    assert len(rows) == N_PAIRS  # every lagging right frame paired with its left one

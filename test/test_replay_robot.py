@@ -197,3 +197,24 @@ def test_replay_loop_into_live_node_keeps_answering(small_frames, tmp_path, ros_
     assert len(answers) >= 2 * N_FRAMES + 1, (answers, proc.output()[-2000:])
     jumps = [k for k in range(1, len(answers)) if answers[k] < answers[k - 1]]
     assert jumps and set(answers) <= set(first)
+
+
+def test_replay_left_right_publish_on_the_nodes_inputs(small_frames, tmp_path, ros_domain_id):
+    bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", small_frames[:3])
+    listener = Listener({"/left/image_raw": Image, "/right/image_raw": Image, LEFT_TOPIC: Image})
+    try:
+        proc = _replay(
+            bag,
+            *("--left", LEFT_TOPIC, "--right", RIGHT_TOPIC, "--topics", LEFT_TOPIC, RIGHT_TOPIC),
+            *("--wait-for", "/left/image_raw", "/right/image_raw"),
+        )
+        _, err = proc.communicate(timeout=60)
+        deadline = time.monotonic() + 10
+        while len(listener.stamps["/right/image_raw"]) < 3 and time.monotonic() < deadline:
+            time.sleep(0.05)
+    finally:
+        listener.close()
+    assert proc.returncode == 0, err
+    assert listener.stamps["/left/image_raw"] == _stamps(bag, LEFT_TOPIC)
+    assert listener.stamps["/right/image_raw"] == _stamps(bag, RIGHT_TOPIC)
+    assert listener.stamps[LEFT_TOPIC] == []  # remapped, not published under the recorded name

@@ -22,7 +22,7 @@ from robot_bags import FORMATS, LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_b
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.bags import load_bag_pairs
 from sepfm_ros.geometry import fundamental_from_cameras
-from sepfm_ros.ros.bags.errors import TopicNotFoundError
+from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, TopicNotFoundError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import header_stamp_ns
@@ -214,3 +214,29 @@ def test_eval_bags_takes_the_topic_flags(kitti_frames, shared_data, tmp_path):
     assert cli.main(argv) == 0
     rows = (out / "runs.csv").read_text().splitlines()[1:]
     assert len(rows) == N_PAIRS  # every lagging right frame paired with its left one
+
+
+def test_bad_ros1_and_unknown_files_give_bag_errors(kitti_frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", kitti_frames[:2])
+    data = bag.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    garbage = tmp_path / "garbage.bag"
+    garbage.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 8)
+    other = tmp_path / "notes.txt"
+    other.write_text("not a bag")
+    for path in (cut, garbage):
+        with pytest.raises(BagCorruptError, match=f"cannot read bag {path}"):
+            BagReader(path)
+    with pytest.raises(BagNotFoundError, match="is not a bag"):
+        BagReader(other)
+    res = subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", "process", str(cut), "-o", str(tmp_path / "o")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert "sepfm_ros process: error: cannot read bag" in res.stderr
+    assert not (tmp_path / "o").exists()

@@ -18,6 +18,8 @@ import cv2
 import numpy as np
 import pytest
 from robot_bags import FORMATS, LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.bags import load_bag_pairs
@@ -240,3 +242,34 @@ def test_bad_ros1_and_unknown_files_give_bag_errors(kitti_frames, tmp_path):
     assert res.returncode == 1 and "Traceback" not in res.stderr
     assert "sepfm_ros process: error: cannot read bag" in res.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_definition_rosbags_cannot_verify_does_not_lose_the_bag(kitti_frames, tmp_path):
+    # a robot's custom message whose stored hash rosbags' AnyReader rejects: the bag still
+    # reads (rosbag2 messages are CDR, read with the Jazzy types) and the images process
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    bag = tmp_path / "custom"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        cam = writer.add_connection("/front/image_raw", "sensor_msgs/msg/Image", typestore=ts)
+        odd = writer.add_connection(
+            "/robot/status",
+            "my_msgs/msg/Status",
+            msgdef="string data\n",
+            rihs01="RIHS01_" + "1" * 64,
+        )
+        for k, (left, _) in enumerate(kitti_frames[:3]):
+            stamp = 1_700_000_000 * 10**9 + k * 100_000_000
+            Time, Header = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
+            header = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id="cam")
+            img = ts.types["sensor_msgs/msg/Image"](
+                header=header, height=left.shape[0], width=left.shape[1], encoding="mono8",
+                is_bigendian=0, step=left.shape[1], data=left.reshape(-1),
+            )  # fmt: skip
+            writer.write(cam, stamp, bytes(ts.serialize_cdr(img, "sensor_msgs/msg/Image")))
+            writer.write(odd, stamp, b"\x00\x01\x00\x00\x03\x00\x00\x00ok\x00")
+    with BagReader(bag) as reader:
+        assert reader.topics["/robot/status"].msgtype == "my_msgs/msg/Status"
+        spec = detect_inputs(reader)
+    assert (spec.mode, spec.topics) == ("motion", ("/front/image_raw",))
+    done, total = run_process(bag, tmp_path / "out", parse_params(PARAMS), progress=False)
+    assert done == total == 2

@@ -25,6 +25,7 @@ RIGHT_TOPIC = "/camera/right/image_raw"
 IMAGE_T = "sensor_msgs/msg/Image"
 INFO_T = "sensor_msgs/msg/CameraInfo"
 TF_T = "tf2_msgs/msg/TFMessage"
+GT_TOPIC = "/ground_truth/fundamental"
 START_NS = 1_700_000_000 * 10**9
 
 
@@ -110,10 +111,13 @@ def write_robot_bag(
     baseline_m: float = 0.54,
     topics: tuple[str, str] = (LEFT_TOPIC, RIGHT_TOPIC),
     extra_image_topics: Sequence[str] = (),
+    ground_truth: Sequence[np.ndarray] | None = None,
 ) -> Path:
     """Write ``frames`` (left, right mono8 arrays) as a robot's stereo recording; returns ``path``.
 
     ``extra_image_topics`` get a copy of the left image (for bags with more cameras than two).
+    ``ground_truth``: a 3x3 F per frame, written as ``/ground_truth/fundamental`` (Image 64FC1,
+    row-major, stamped like the left image) the way ``make_bag`` stores it.
     """
     if fmt not in FORMATS:
         raise ValueError(f"fmt must be one of {FORMATS}")
@@ -139,6 +143,7 @@ def write_robot_bag(
             (info_topics[1], INFO_T),
             ("/tf", TF_T),
             *[(t, IMAGE_T) for t in extra_image_topics],
+            *([(GT_TOPIC, IMAGE_T)] if ground_truth is not None else []),
         ]:
             conns[topic] = writer.add_connection(topic, msgtype, typestore=ts)
         messages = []
@@ -155,6 +160,18 @@ def write_robot_bag(
                 (t_right, info_topics[1], _camera_info(ts, fmt, hr, (w, h), K, P_right), INFO_T),
             ]
             messages += [(t_left, t, _image(ts, hl, left), IMAGE_T) for t in extra_image_topics]
+            if ground_truth is not None:
+                F = np.asarray(ground_truth[k], "<f8")
+                gt = ts.types[IMAGE_T](
+                    header=hl,
+                    height=3,
+                    width=3,
+                    encoding="64FC1",
+                    is_bigendian=0,
+                    step=24,
+                    data=np.frombuffer(F.tobytes(), np.uint8),
+                )
+                messages.append((t_left, GT_TOPIC, gt, IMAGE_T))
         for t, topic, msg, msgtype in sorted(messages, key=lambda m: m[0]):
             if fmt == "ros1":
                 data = ts.serialize_ros1(msg, msgtype)

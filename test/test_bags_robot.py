@@ -9,6 +9,7 @@ layout (``make_bag``).
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -17,8 +18,13 @@ import cv2
 import numpy as np
 import pytest
 from robot_bags import FORMATS, LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag
+from rosbags.rosbag2 import StoragePlugin, Writer
+from rosbags.typesys import Stores, get_typestore
 
-from sepfm_ros.ros.bags.errors import TopicNotFoundError
+from sepfm_ros.evaluation import cli
+from sepfm_ros.evaluation.bags import load_bag_pairs
+from sepfm_ros.geometry import fundamental_from_cameras
+from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, TopicNotFoundError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import header_stamp_ns
@@ -181,3 +187,89 @@ def test_ambiguous_image_topics_give_a_clear_error(kitti_frames, tmp_path):
             detect_inputs(reader, mode="motion")
         with pytest.raises(TopicNotFoundError, match="/nope is not in bag"):
             detect_inputs(reader, left="/nope", right=RIGHT_TOPIC)
+
+
+def test_eval_bags_takes_the_topic_flags(kitti_frames, shared_data, tmp_path):
+    cams = json.loads((shared_data / "cameras.json").read_text())
+    gt = [
+        fundamental_from_cameras(
+            np.array(cams[f"kitti_seq2/left/{i:06d}.png"]),
+            np.array(cams[f"kitti_seq2/right/{i:06d}.png"]),
+        )
+        for i in range(N_PAIRS)
+    ]
+    bag = write_robot_bag(
+        bag_path(tmp_path, "ros1"),
+        "ros1",
+        kitti_frames,
+        right_lag_ns=LAG_NS,
+        extra_image_topics=["/camera/center/image_raw"],
+        ground_truth=[g / np.linalg.norm(g) for g in gt],
+    )
+    # three cameras: no pick, one error for the bag naming the flags
+    pairs, errors = load_bag_pairs(bag, tmp_path / "frames")
+    assert pairs == [] and len(errors) == 1 and "--left TOPIC --right TOPIC" in errors[0].message
+    out = tmp_path / "out"
+    argv = ["--bags", str(bag), "--left", LEFT_TOPIC, "--right", RIGHT_TOPIC, "--out", str(out),
+            "--cache", str(tmp_path / "cache"), "--methods", "cv-ransac", "--seeds", "0",
+            "--no-progress"]  # fmt: skip
+    assert cli.main(argv) == 0
+    rows = (out / "runs.csv").read_text().splitlines()[1:]
+    assert len(rows) == N_PAIRS  # every lagging right frame paired with its left one
+
+
+def test_bad_ros1_and_unknown_files_give_bag_errors(kitti_frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", kitti_frames[:2])
+    data = bag.read_bytes()
+    cut = tmp_path / "cut.bag"
+    cut.write_bytes(data[: len(data) // 2])
+    garbage = tmp_path / "garbage.bag"
+    garbage.write_bytes(b"#ROSBAG V2.0\n" + bytes(range(256)) * 8)
+    other = tmp_path / "notes.txt"
+    other.write_text("not a bag")
+    for path in (cut, garbage):
+        with pytest.raises(BagCorruptError, match=f"cannot read bag {path}"):
+            BagReader(path)
+    with pytest.raises(BagNotFoundError, match="is not a bag"):
+        BagReader(other)
+    res = subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", "process", str(cut), "-o", str(tmp_path / "o")],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert res.returncode == 1 and "Traceback" not in res.stderr
+    assert "sepfm_ros process: error: cannot read bag" in res.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_definition_rosbags_cannot_verify_does_not_lose_the_bag(kitti_frames, tmp_path):
+    # a robot's custom message whose stored hash rosbags' AnyReader rejects: the bag still
+    # reads (rosbag2 messages are CDR, read with the Jazzy types) and the images process
+    ts = get_typestore(Stores.ROS2_JAZZY)
+    bag = tmp_path / "custom"
+    with Writer(bag, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        cam = writer.add_connection("/front/image_raw", "sensor_msgs/msg/Image", typestore=ts)
+        odd = writer.add_connection(
+            "/robot/status",
+            "my_msgs/msg/Status",
+            msgdef="string data\n",
+            rihs01="RIHS01_" + "1" * 64,
+        )
+        for k, (left, _) in enumerate(kitti_frames[:3]):
+            stamp = 1_700_000_000 * 10**9 + k * 100_000_000
+            Time, Header = ts.types["builtin_interfaces/msg/Time"], ts.types["std_msgs/msg/Header"]
+            header = Header(stamp=Time(sec=stamp // 10**9, nanosec=stamp % 10**9), frame_id="cam")
+            img = ts.types["sensor_msgs/msg/Image"](
+                header=header, height=left.shape[0], width=left.shape[1], encoding="mono8",
+                is_bigendian=0, step=left.shape[1], data=left.reshape(-1),
+            )  # fmt: skip
+            writer.write(cam, stamp, bytes(ts.serialize_cdr(img, "sensor_msgs/msg/Image")))
+            writer.write(odd, stamp, b"\x00\x01\x00\x00\x03\x00\x00\x00ok\x00")
+    with BagReader(bag) as reader:
+        assert reader.topics["/robot/status"].msgtype == "my_msgs/msg/Status"
+        spec = detect_inputs(reader)
+    assert (spec.mode, spec.topics) == ("motion", ("/front/image_raw",))
+    done, total = run_process(bag, tmp_path / "out", parse_params(PARAMS), progress=False)
+    assert done == total == 2

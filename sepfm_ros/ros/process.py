@@ -438,7 +438,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("bag", type=Path, help="input bag (directory or .mcap)")
+    p.add_argument("bag", type=Path, help="input bag: rosbag2 folder, .mcap, .db3 or ROS 1 .bag")
     p.add_argument("-o", "--output", type=Path, required=True, help="output bag (must not exist)")
     p.add_argument("--mode", choices=("stereo", "motion"), help="default: from the bag's topics")
     add_topic_arguments(p)

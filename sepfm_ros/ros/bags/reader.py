@@ -23,6 +23,7 @@ from rosbags.convert.converter import (
 )
 from rosbags.highlevel import AnyReader
 from rosbags.interfaces import Connection, Qos
+from rosbags.rosbag2 import Reader as Reader2
 from rosbags.typesys import Stores, get_typestore
 
 from sepfm_ros.ros.bags.errors import (
@@ -82,12 +83,8 @@ class BagReader:
                 f"{self.path} is not a bag: expected a rosbag2 folder or a "
                 f"{', '.join(BAG_SUFFIXES)} file"
             )
-        try:
-            self._reader = AnyReader([self.path], default_typestore=TYPESTORE)
-            self._reader.open()
-        except Exception as err:  # noqa: BLE001 - rosbags raises many kinds on bad storage
-            raise BagCorruptError(f"cannot read bag {self.path}: {err}") from None
-        self.is_ros1 = not self._reader.is2
+        self._reader: AnyReader | Reader2 = self._open()
+        self.is_ros1 = isinstance(self._reader, AnyReader) and not self._reader.is2
         self.typestore = TYPESTORE
         self._to_cdr: dict[str, Callable[[bytes], bytes]] = {}
         self._msgtype: dict[int, str] = {}  # connection id -> ROS 2 type name
@@ -115,6 +112,24 @@ class BagReader:
                     f"topic {conn.topic} has two types in {self.path}: {old.msgtype}, {msgtype}"
                 )
             self.topics[conn.topic] = TopicInfo(conn.topic, msgtype, count, qos)
+
+    def _open(self) -> AnyReader | Reader2:
+        """AnyReader; for a rosbag2 bag whose stored definitions rosbags cannot parse or verify
+        (messages are CDR and read with the Jazzy types anyway), the plain rosbag2 reader."""
+        try:
+            reader = AnyReader([self.path], default_typestore=TYPESTORE)
+            reader.open()
+            return reader
+        except Exception as err:  # noqa: BLE001 - rosbags raises many kinds on bad storage
+            first = err
+        if self.path.suffix != ".bag":
+            try:
+                plain = Reader2(self.path)
+                plain.open()
+                return plain
+            except Exception:  # noqa: BLE001 - report AnyReader's error, the first cause
+                pass
+        raise BagCorruptError(f"cannot read bag {self.path}: {first}") from None
 
     def _ros2_type(self, conn: Connection) -> str:
         return self._msgtype.get(conn.id, conn.msgtype)

@@ -21,6 +21,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "record": ("sepfm_ros.ros.record", "main", "record topics into a bag"),
     "process": ("sepfm_ros.ros.process", "main", "run the pipeline over a bag offline"),
     "eval": ("sepfm_ros.evaluation.cli", "main", "evaluate estimators on pairs with ground truth"),
+    "warm_up": (
+        "sepfm_ros.warm_up",
+        "main",
+        "compile (or load) the kernels before the first start",
+    ),
 }
 
 
@@ -69,3 +74,4 @@ replay_main = _entry("replay")
 record_main = _entry("record")
 process_main = _entry("process")
 eval_main = _entry("eval")
+warm_up_main = _entry("warm_up")

@@ -5,7 +5,7 @@ Two ways to install, one setup.py:
 - ``pip install -e '.[ros,test]'`` in a plain Python environment: rclpy and the message packages
   come from the PyPI wheels in the ``ros`` extra; the one console command is ``sepfm_ros``.
 - ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process`` and ``eval`` are installed to
+  ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds
@@ -19,7 +19,16 @@ from setuptools import find_packages, setup
 
 PACKAGE = "sepfm_ros"
 # Subcommands of the `sepfm_ros` console command that are also `ros2 run` executables.
-EXECUTABLES = ["node", "make_bag", "replay", "record", "process", "eval"]
+EXECUTABLES = [
+    "node",
+    "make_bag",
+    "replay",
+    "record",
+    "process",
+    "eval",
+    "warm_up",
+    "calibration_check",
+]
 _WHEEL_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
 _building_wheel = bool(_WHEEL_COMMANDS.intersection(sys.argv[1:]))
 
@@ -34,7 +43,7 @@ setup(
     package_data={PACKAGE: ["data/*"]},
     data_files=[
         ("share/ament_index/resource_index/packages", [f"resource/{PACKAGE}"]),
-        (f"share/{PACKAGE}", ["package.xml"]),
+        (f"share/{PACKAGE}", ["package.xml", "rosdep.yaml"]),
         (f"share/{PACKAGE}/config", glob("config/*.yaml")),
         (f"share/{PACKAGE}/launch", glob("launch/*.py")),
         # the bundled bags (sepfm_ros demo), one folder per bag
@@ -42,10 +51,10 @@ setup(
     ],
     python_requires=">=3.10",
     install_requires=[
-        "numpy>=1.24",
-        "opencv-contrib-python-headless>=4.8",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
-        "rosbags>=0.10",
-        "rosbags-image>=0.10",
+        "numpy>=1.26",
+        "opencv-contrib-python-headless>=4.6",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
+        "rosbags>=0.11",
+        "rosbags-image>=0.10.3",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
         # core); python3-threadpoolctl in package.xml
         "threadpoolctl>=3.1",
@@ -53,13 +62,13 @@ setup(
         # progress bar of long runs. Both install from binary wheels; packaged as
         # python3-matplotlib and python3-tqdm for ROS (package.xml), which has no optional
         # dependencies.
-        "matplotlib>=3.5",
-        "tqdm>=4.60",
+        "matplotlib>=3.6",
+        "tqdm>=4.64",
         # the estimator's hot loops (scoring, refits, solvers) compiled to machine code: numpy
         # call overhead dominated at a few hundred matches. numba's np.linalg needs SciPy's
         # LAPACK. python3-numba and python3-scipy in package.xml.
-        "numba>=0.59",
-        "scipy>=1.10",
+        "numba>=0.58.1",
+        "scipy>=1.11",
     ],
     extras_require={
         # ROS 2 Jazzy from PyPI wheels, for machines without a ROS install (colcon users get these

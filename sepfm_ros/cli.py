@@ -22,6 +22,11 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "process": ("sepfm_ros.ros.process", "main", "run the pipeline over a bag offline"),
     "eval": ("sepfm_ros.evaluation.cli", "main", "evaluate estimators on pairs with ground truth"),
     "calibration_check": ("sepfm_ros.ros.calibration_check", "main", "check a stereo calibration"),
+    "warm_up": (
+        "sepfm_ros.warm_up",
+        "main",
+        "compile (or load) the kernels before the first start",
+    ),
 }
 
 
@@ -70,3 +75,5 @@ replay_main = _entry("replay")
 record_main = _entry("record")
 process_main = _entry("process")
 eval_main = _entry("eval")
+warm_up_main = _entry("warm_up")
+calibration_check_main = _entry("calibration_check")

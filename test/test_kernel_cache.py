@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import os
+import re
+import subprocess
+import sys
 
 from sepfm_ros.kernel_cache import ensure_fresh_cache
 
@@ -34,3 +37,21 @@ def test_cache_dropped_only_when_a_source_changes(tmp_path):
     st = (pkg / "sub" / "b.py").stat()
     os.utime(pkg / "sub" / "b.py", ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # touched
     assert ensure_fresh_cache(pkg, stamp) == 2
+
+
+def test_warm_up_compiles_once_then_loads_from_the_cache(tmp_path):
+    # a cache of its own (NUMBA_CACHE_DIR takes precedence over the in-tree one): the first run
+    # must compile, the second must only load, and both say where the cache is
+    env = dict(os.environ, NUMBA_CACHE_DIR=str(tmp_path / "numba"))
+    cmd = [sys.executable, "-m", "sepfm_ros", "warm_up"]
+    runs = []
+    for _ in range(2):
+        r = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=900)
+        assert r.returncode == 0, r.stdout + r.stderr
+        assert f"cache: {tmp_path / 'numba'}" in r.stdout, r.stdout
+        runs.append(r.stdout)
+    first = re.search(r"compiled (\d+) kernels and loaded (\d+) from the cache in", runs[0])
+    assert first and int(first.group(1)) >= 10, runs[0]
+    second = re.search(r"loaded all (\d+) kernels from the cache \(nothing to compile\)", runs[1])
+    assert second and int(second.group(1)) >= 10, runs[1]
+    assert any((tmp_path / "numba").rglob("*.nbi"))

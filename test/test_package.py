@@ -37,7 +37,7 @@ def test_console_command_lists_every_subcommand():
         [sys.executable, "-m", "sepfm_ros", "--help"], capture_output=True, text=True, timeout=60
     )
     assert r.returncode == 0
-    for name in ("node", "make_bag", "replay", "record", "process", "eval", "demo"):
+    for name in ("node", "make_bag", "replay", "record", "process", "eval", "demo", "warm_up"):
         assert f"  {name}" in r.stdout
     r = subprocess.run(
         [sys.executable, "-m", "sepfm_ros", "no_such_command"], capture_output=True, text=True
@@ -45,7 +45,9 @@ def test_console_command_lists_every_subcommand():
     assert r.returncode == 2 and "unknown command" in r.stderr
 
 
-@pytest.mark.parametrize("name", ["node", "make_bag", "replay", "record", "process", "eval"])
+@pytest.mark.parametrize(
+    "name", ["node", "make_bag", "replay", "record", "process", "eval", "warm_up"]
+)
 def test_every_subcommand_has_help(name):
     r = subprocess.run(
         [sys.executable, "-m", "sepfm_ros", name, "--help"],
@@ -191,3 +193,28 @@ def test_every_imported_module_is_declared_in_package_xml():
         assert not unmapped, f"imports without a known rosdep key: {unmapped}"
         missing = {MODULE_KEYS[m] for m in modules - OPTIONAL_MODULES} - keys
         assert not missing, f"imported but not declared as {what} in package.xml: {missing}"
+
+
+def _install_requires() -> dict[str, str]:
+    """name -> lower bound of every ``name>=version`` in setup.py's install_requires."""
+    import ast
+
+    tree = ast.parse((REPO_ROOT / "setup.py").read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.keyword) and node.arg == "install_requires":
+            specs = [ast.literal_eval(e) for e in node.value.elts]
+            return dict(s.split(">=") for s in specs)
+    raise AssertionError("setup.py has no install_requires")
+
+
+def test_oldest_ci_pins_are_setup_py_lower_bounds():
+    # .ci/oldest.sh installs these pins and runs the geometry, image and node tests on them: the
+    # pins must be the oldest releases setup.py allows, so the bounds are what CI has tested
+    lines = (REPO_ROOT / ".ci" / "oldest-constraints.txt").read_text().splitlines()
+    pins = dict(line.split("==") for line in lines if line and not line.startswith("#"))
+    bounds = _install_requires()
+    for name, bound in bounds.items():
+        assert name in pins, f"{name} has no pin in .ci/oldest-constraints.txt"
+        want = [int(x) for x in bound.split(".")]
+        have = [int(x) for x in pins[name].split(".")]
+        assert have[: len(want)] == want, f"{name}: setup.py >={bound}, CI tests {pins[name]}"

@@ -16,7 +16,8 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry.pose import pose_from_projections
-from sepfm_ros.ros.bag_io import RawMessage, write_bag
+from sepfm_ros.ros.bags.reader import RawMessage
+from sepfm_ros.ros.bags.writer import write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image
 
 REPO_ROOT = Path(__file__).resolve().parent.parent

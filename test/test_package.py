@@ -82,6 +82,7 @@ JAZZY_PACKAGES = {
     "sensor_msgs",
     "std_msgs",
     "diagnostic_msgs",
+    "geometry_msgs",
     "ament_index_python",
     "launch",
     "launch_ros",

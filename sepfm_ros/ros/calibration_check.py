@@ -34,7 +34,9 @@ from sepfm_ros.geometry.calibration_check import (
 )
 from sepfm_ros.geometry.camera import CalibrationError
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
-from sepfm_ros.ros.bag_io import BagError, BagReader, format_stamp
+from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.types import format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
 

@@ -52,7 +52,7 @@ MATCH_DTYPE = np.dtype(
 def stamp_ns(stamp: Time) -> int:
     """builtin_interfaces/Time (or any object with ``sec`` and ``nanosec``) -> integer ns.
 
-    The package's one stamp conversion (serialized CDR headers: ``bag_io.header_stamp_ns``).
+    The package's one stamp conversion (serialized CDR headers: ``bags.types.header_stamp_ns``).
     """
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 

@@ -64,11 +64,33 @@ def test_colcon_build_installs_executables_and_share_files(colcon_install):
         assert os.access(prefix / "lib" / "sepfm_ros" / name, os.X_OK), name
     share = prefix / "share" / "sepfm_ros"
     assert (share / "package.xml").is_file()
+    assert (share / "rosdep.yaml").is_file()
     assert (share / "config" / "sepfm.yaml").is_file()
     assert (share / "launch" / "sepfm_launch.py").is_file()
     assert (colcon_install.parent / "install").is_dir()
     index = prefix / "share" / "ament_index" / "resource_index" / "packages" / "sepfm_ros"
     assert index.is_file()
+
+
+def test_ros2_run_warm_up_caches_kernels_inside_the_install(colcon_install, tmp_path):
+    # `ros2 run sepfm_ros warm_up` after `colcon build`: the kernel cache must be writable
+    # there, beside the installed modules, so later node starts load it
+    env = installed_env(colcon_install)
+    env.pop("NUMBA_CACHE_DIR", None)
+    executable = colcon_install / "sepfm_ros" / "lib" / "sepfm_ros" / "warm_up"
+    runs = []
+    for _ in range(2):
+        r = subprocess.run(
+            [str(executable)], env=env, cwd=tmp_path, capture_output=True, text=True, timeout=900
+        )
+        assert r.returncode == 0, r.stdout + r.stderr
+        runs.append(r.stdout)
+    caches = [
+        Path(line.split("cache: ", 1)[1]) for line in runs[0].splitlines() if "cache: " in line
+    ]
+    assert caches and all(c.is_relative_to(colcon_install) for c in caches), runs[0]
+    assert all(any(c.glob("*.nbi")) for c in caches), runs[0]
+    assert "nothing to compile" in runs[1], runs[1]
 
 
 def test_ros2_run_node_from_the_ament_prefix_publishes(colcon_install, ros_domain_id, tmp_path):

@@ -165,7 +165,8 @@ def pipeline_steps(mode: str, images: list) -> list[tuple]:
 def bench_pipeline(mode, images, args) -> None:
     from sepfm_ros.pipeline.compiled import warm_up
     from sepfm_ros.pipeline.pipeline import Pipeline
-    from sepfm_ros.ros.node import limit_thread_pools, pipeline_config
+    from sepfm_ros.ros.node_main import limit_thread_pools
+    from sepfm_ros.ros.parameters import pipeline_config
 
     limit_thread_pools(1)  # as in the node
     warm_up()  # as the node does before its first frame: compiling is not timed

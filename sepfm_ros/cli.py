@@ -15,7 +15,7 @@ from collections.abc import Callable, Sequence
 # a process exit code.
 SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "demo": ("sepfm_ros.demo", "main", "run the main job on data the package ships or makes"),
-    "node": ("sepfm_ros.ros.node", "main", "the live two-view geometry node"),
+    "node": ("sepfm_ros.ros.node_main", "main", "the live two-view geometry node"),
     "make_bag": ("sepfm_ros.ros.make_bag", "main", "build a bag from images or shared data"),
     "replay": ("sepfm_ros.ros.replay", "main", "publish a bag into live topics"),
     "record": ("sepfm_ros.ros.record", "main", "record topics into a bag"),

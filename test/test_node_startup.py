@@ -55,7 +55,7 @@ NODE_FORBIDDEN += ("rosbags.highlevel", "tqdm", "matplotlib")
 def test_node_command_imports_no_bag_or_progress_bar_modules():
     pytest.importorskip("rclpy")
     code = (
-        "import sys, sepfm_ros.cli, sepfm_ros.ros.node;"
+        "import sys, sepfm_ros.cli, sepfm_ros.ros.node_main;"
         f"bad = sorted(m for m in sys.modules if m.startswith({NODE_FORBIDDEN!r}));"
         "print(bad); sys.exit(1 if bad else 0)"
     )

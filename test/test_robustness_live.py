@@ -148,8 +148,8 @@ def kind_of(msg) -> str | None:
 # --------------------------------------------------------------------------- fuzz generators
 RAW_ENCODINGS = ["mono8", "bgr8", "rgb8", "mono16", "bgra8", "bayer_rggb8", "yuv422", "16UC1"]
 RAW_ENCODINGS += ["8UC3", "32FC1", "64FC1"]
-JUNK_ENCODINGS = ["", "h264", "32FC3", "mono12", "bgr16", "rgb8 ", "MONO8", "bayer_rggb16"]
-JUNK_ENCODINGS += ["8SC1", "\x00", "ü" * 5, "x" * 5000, "jpeg", "nv12"]
+JUNK_ENCODINGS = ["", "h264", "8UC2", "mono12", "16SC2", "rgb8 ", "MONO8", "bayer_rggb12"]
+JUNK_ENCODINGS += ["nv24", "\x00", "ü" * 5, "x" * 5000, "jpeg", "yuv420"]
 SHALLOW_RAW = ("zero_size", "bad_step", "short_data", "long_data", "unknown_encoding")
 
 

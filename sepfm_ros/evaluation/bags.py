@@ -29,7 +29,7 @@ from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BAG_SUFFIXES, BagReader
 from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
-from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.ros.process import iter_pairs, pairing_slop_ns, parse_params, validate_inputs
 from sepfm_ros.ros.results import OUTPUT_NAMESPACE, output_topics, read_ground_truth, read_results
@@ -78,8 +78,8 @@ def _input_bag_pairs(
                 raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with stamp {stamp} ns")
             F = parse_fundamental(gt[stamp])
             paths = []
-            for tag, msg in (("a", job.msg_a), ("b", job.msg_b)):
-                img = message_to_numpy(msg, "mono8")
+            images = pair_to_numpy(job.msg_a, job.msg_b, "mono8")  # one contrast for the pair
+            for tag, img in zip(("a", "b"), images, strict=True):
                 p = out / f"{stamp}_{tag}.png"
                 if not cv2.imwrite(str(p), img):
                     raise PairDataError(f"cannot write decoded frame {p}")

@@ -258,6 +258,9 @@ def main(argv: list[str]) -> int:
     parser.add_argument("--rate", type=float, default=1.0, help="replay speed (default 1)")
     parser.add_argument("-p", "--param", action="append", default=[], metavar="NAME:=VALUE")
     parser.add_argument("--quiet", action="store_true", help="no progress line")
+    parser.add_argument(
+        "--picture", type=Path, help="also write the debug image here (README's docs/demo.png)"
+    )
     args = parser.parse_args(argv)
     try:
         bag = args.bag or bundled_bags_dir() / DEFAULT_BAG
@@ -300,5 +303,7 @@ def main(argv: list[str]) -> int:
         png = out / "debug.png"
         if write_debug_image(run.output, pick.stamp_ns, png):
             print(f"debug image (inliers, line pair, epipolar lines): {png}")
+            if args.picture is not None:
+                args.picture.write_bytes(png.read_bytes())
     print(f"outputs recorded in {run.output}; node log {out / 'node.log'}")
     return 0 if results else 1

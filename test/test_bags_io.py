@@ -197,13 +197,14 @@ def bad_bags(tmp_path) -> dict[str, Path]:
     shutil.copytree(STEREO, bags["truncated"])
     mcap = next(bags["truncated"].glob("*.mcap"))
     os.truncate(mcap, mcap.stat().st_size // 2)
-    # corrupt: chunk bytes overwritten in the middle (index and footer intact)
+    # corrupt: chunk bytes overwritten in the middle (index and footer intact); the window is
+    # longer than any message, so it overwrites at least one record header, never just pixels
     bags["corrupt"] = tmp_path / "corrupt"
     shutil.copytree(STEREO, bags["corrupt"])
     mcap = next(bags["corrupt"].glob("*.mcap"))
     data = bytearray(mcap.read_bytes())
-    mid = len(data) // 2
-    data[mid : mid + 4096] = os.urandom(4096)
+    mid, window = len(data) // 2, 256 * 1024
+    data[mid : mid + window] = b"\xff" * window
     mcap.write_bytes(bytes(data))
     # missing metadata.yaml
     bags["no_metadata"] = tmp_path / "no_metadata"

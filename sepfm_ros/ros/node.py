@@ -32,18 +32,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import TransformStamped
+from diagnostic_msgs.msg import DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
 from rclpy.node import Node
 from rclpy.parameter import Parameter
-from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import CompressedImage, Image, PointCloud2
+from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry.calibration_check import MonitorConfig
 from sepfm_ros.geometry.camera import CameraModel
-from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
     Pipeline,
@@ -57,7 +54,6 @@ from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
     check_compressed,
     check_image,
-    numpy_to_image,
     pair_to_numpy,
 )
 from sepfm_ros.ros.memory import (
@@ -65,18 +61,15 @@ from sepfm_ros.ros.memory import (
 )
 from sepfm_ros.ros.messages import (
     copy_header,
-    diagnostic_array,
-    estimate_info,
-    failure_info,
-    fundamental_to_image,
     health_status,
-    result_to_pointcloud2,
     stamp_ns,
 )
+from sepfm_ros.ros.outputs import Answer, NodeOutputs
 from sepfm_ros.ros.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
 from sepfm_ros.ros.parameters import (
     NODE_NAME,
     PARAMS,
+    change_errors,
     descriptor,
     monitor_config,
     parameter_error,
@@ -165,14 +158,7 @@ class SepfmNode(Node):
         self._threshold_px = float(values["threshold_px"])
         self._pending_monitor: MonitorConfig | None = None
 
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self._pub_f = self.create_publisher(Image, "~/fundamental", reliable)
-        self._pub_matches = self.create_publisher(PointCloud2, "~/matches", reliable)
-        self._pub_info = self.create_publisher(DiagnosticArray, "~/estimate_info", reliable)
-        self._pub_debug = self.create_publisher(Image, "~/debug_image", reliable)
-        self._pub_diag = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
-        self._pub_pose = self.create_publisher(TransformStamped, "~/relative_transform", reliable)
-        self._pub_calib = self.create_publisher(DiagnosticStatus, "~/calibration_check", reliable)
+        self._out = NodeOutputs(self)
 
         msg_type = CompressedImage if self._transport == "compressed" else Image
         if self._mode == "stereo":
@@ -238,23 +224,8 @@ class SepfmNode(Node):
         return {name: self.get_parameter(name).value for name in PARAMS}
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        values = self._param_values()
-        reasons = []
-        for p in params:
-            if p.name in PARAMS and PARAMS[p.name].read_only:
-                reasons.append(f"{p.name} is read-only (set it at start-up)")
-                continue
-            error = parameter_error(p.name, p.value)
-            if error:
-                reasons.append(error)
-            elif p.name in PARAMS:
-                values[p.name] = p.value
-        if not reasons:
-            try:
-                pipeline_config(values)
-                monitor_config(values)
-            except ValueError as err:
-                reasons.append(str(err))
+        changes = {p.name: p.value for p in params}
+        reasons = change_errors(self._param_values(), changes)
         if reasons:
             reason = "; ".join(reasons)
             self.get_logger().warning(f"parameter change rejected: {reason}")
@@ -448,19 +419,8 @@ class SepfmNode(Node):
     def _publish_failure(self, job: Job, kind: str, reason: str) -> None:
         """Answer a pair that could not be processed on ~/estimate_info (ERROR level)."""
         try:
-            config = self._pipeline.config
-            self._pub_info.publish(
-                failure_info(
-                    job.header,
-                    job.msg_a.header.stamp,
-                    job.msg_b.header.stamp,
-                    reason,
-                    kind,
-                    config.features,
-                    config.method,
-                    node_name=self.get_fully_qualified_name(),
-                )
-            )
+            stamps = job.msg_a.header.stamp, job.msg_b.header.stamp
+            self._out.failure(job.header, *stamps, reason, kind, self._pipeline.config)
         except Exception as err:  # noqa: BLE001 - e.g. shutting down; never kill the worker
             self._bad_input(f"internal_{type(err).__name__}", f"cannot publish a failure: {err}")
 
@@ -494,7 +454,7 @@ class SepfmNode(Node):
             self._log_throttled("camera_info_invalid", f"camera_info unusable: {update.reason}")
             with self._lock:
                 self._calib_status = update.error
-            self._pub_calib.publish(update.error)
+            self._out.calibration.publish(update.error)
         elif update.changed:
             calibration = self._calibrated.calibration
             self.get_logger().info(
@@ -514,47 +474,36 @@ class SepfmNode(Node):
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
         cameras = self._cameras(item)
         result = self._pipeline.estimate(item.matched, cameras)
-        header = job.header
         with self._lock:
             publish_unreliable = self._publish_unreliable
             n_lines = self._epipolar_lines
             threshold_px = self._threshold_px
-        extra_values: dict[str, Any] = {}
+        values: dict[str, Any] = {}
         if cameras is not None:
             t0 = time.perf_counter()
             frames = self._calibrated.frames(job.msg_a.header.frame_id, job.msg_b.header.frame_id)
-            calibrated = self._calibrated.messages(result, threshold_px, header, frames)
-            extra_values = calibrated.values
-            if calibrated.transform is not None:
-                self._pub_pose.publish(calibrated.transform)
+            calibrated = self._calibrated.messages(result, threshold_px, job.header, frames)
+            values = calibrated.values
             if calibrated.status is not None:
                 with self._lock:
                     self._calib_status = calibrated.status
-                self._pub_calib.publish(calibrated.status)
+            self._out.calibrated(calibrated)
             result.timings_ms["pose"] = (time.perf_counter() - t0) * 1e3
-        t0 = time.perf_counter()
         published = result.estimate.F is not None and (result.ok or publish_unreliable)
-        if published:
-            self._pub_f.publish(fundamental_to_image(result.estimate.F, header))
-        self._pub_matches.publish(result_to_pointcloud2(result, header))
-        publish_ms = (time.perf_counter() - t0) * 1e3
         latency_ms = (time.monotonic() - job.received) * 1e3
-        extra = {"publish": publish_ms, "wait": item.wait_ms, "queue": queue_ms}
-        self._pub_info.publish(
-            estimate_info(
-                result,
-                header,
-                job.msg_a.header.stamp,
-                job.msg_b.header.stamp,
-                item.matched.config.features,
-                extra_timings_ms={**extra, "latency": latency_ms},
-                node_name=self.get_fully_qualified_name(),
-                extra_values=extra_values,
-            )
+        answer = Answer(
+            result,
+            job.header,
+            job.msg_a.header.stamp,
+            job.msg_b.header.stamp,
+            item.matched.config.features,
+            published,
+            {"wait": item.wait_ms, "queue": queue_ms, "latency": latency_ms},
+            values,
+            item.images,
+            n_lines,
         )
-        if self._pub_debug.get_subscription_count() > 0:
-            canvas = draw_result(*item.images, result, n_lines)
-            self._pub_debug.publish(numpy_to_image(canvas, "bgr8", header))
+        self._out.answer(answer)
         self._health.answered(latency_ms, item.wait_ms, published, result.ok)
 
     # ---------------------------------------------------------------- health
@@ -567,12 +516,9 @@ class SepfmNode(Node):
         values["input_publishers"] = min(s.publisher_count() for s in self._subs)
         for sub, name in zip(self._subs, self._health.topics, strict=True):
             values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
-        # and subscribers matched by the result publishers (the fewest over F, matches, info)
-        values["output_subscribers"] = min(
-            p.get_subscription_count() for p in (self._pub_f, self._pub_matches, self._pub_info)
-        )
-        # ~/debug_image is drawn (on the estimate thread, after the answer) only for these
-        values["debug_image_subscribers"] = self._pub_debug.get_subscription_count()
+        # subscribers matched by the result publishers (the fewest over F, matches, info) and by
+        # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
+        values.update(self._out.subscribers())
         # motion mode: each frame detected once (its features are cached by stamp)
         values["images_detected"] = self._pipeline.images_detected
         values["images_features_cached"] = self._pipeline.images_cached
@@ -604,12 +550,11 @@ class SepfmNode(Node):
             values,
             self.get_fully_qualified_name(),
         )
-        header = Header(stamp=self.get_clock().now().to_msg(), frame_id="")
         statuses = [status]
         with self._lock:
             if self._calib_status is not None:
                 statuses.append(self._calib_status)
-        self._pub_diag.publish(diagnostic_array(header, statuses))
+        self._out.report(self.get_clock().now().to_msg(), statuses)
 
     def shutdown(self) -> None:
         """Stop the worker threads (waits for the pairs in progress)."""

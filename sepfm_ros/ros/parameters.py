@@ -254,3 +254,26 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
         warn_rotation_deg=float(values["calibration_warn_rotation_deg"]),
         error_rotation_deg=float(values["calibration_error_rotation_deg"]),
     )
+
+
+def change_errors(values: dict[str, Any], changes: dict[str, Any]) -> list[str]:
+    """Why the run-time parameter ``changes`` (name -> new value) cannot be applied to the
+    current ``values`` (empty when they can): read-only, out of range, or an invalid config."""
+    values = dict(values)
+    reasons = []
+    for name, value in changes.items():
+        if name in PARAMS and PARAMS[name].read_only:
+            reasons.append(f"{name} is read-only (set it at start-up)")
+            continue
+        error = parameter_error(name, value)
+        if error:
+            reasons.append(error)
+        elif name in PARAMS:
+            values[name] = value
+    if not reasons:
+        try:
+            pipeline_config(values)
+            monitor_config(values)
+        except ValueError as err:
+            reasons.append(str(err))
+    return reasons

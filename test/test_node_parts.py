@@ -70,12 +70,15 @@ def test_stereo_pairing_nearest_right_at_half_period_slop_with_lag():
     assert pairing.offset_ns() == 12 * MS
 
 
-def test_stereo_pairing_default_slop_pairs_nothing_with_a_12ms_lag():
+@pytest.mark.parametrize("right_first", [False, True])
+def test_stereo_pairing_default_slop_pairs_nothing_with_a_12ms_lag(right_first):
     pairing: StereoPairing[str] = StereoPairing(slop_ns=5 * MS, queue_size=10)
     for k in range(5):
-        assert pairing.add(LEFT, Frame("l", k * 100 * MS)).pair is None
-        assert pairing.add(RIGHT, Frame("r", k * 100 * MS + 12 * MS)).pair is None
-    assert pairing.offset_ns() == 12 * MS
+        events = [(LEFT, k * 100 * MS), (RIGHT, k * 100 * MS + 12 * MS)]
+        for side, stamp in reversed(events) if right_first else events:
+            assert pairing.add(side, Frame("lr"[side], stamp)).pair is None
+            if k:  # the offset of a frame's two images, whichever arrived first
+                assert pairing.offset_ns() == 12 * MS
 
 
 def test_stereo_pairing_restarts_after_a_jump_back():

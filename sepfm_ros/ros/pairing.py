@@ -61,12 +61,12 @@ class StereoPairing(Generic[T]):
         self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
 
     def offset_ns(self) -> int | None:
-        """Right minus left stamp of the nearest recent left/right frames (ns), or None."""
+        """Right minus left stamp of the nearest pair among the recent left and right frames
+        (ns), or None: the same whichever of a frame's two images arrives first."""
         left, right = self._recent
         if not left or not right:
             return None
-        r = right[-1]
-        return min((r - s for s in left), key=abs)
+        return min((r - s for r in right for s in left), key=abs)
 
     def add(self, side: int, frame: Frame[T]) -> PairOutcome[T]:
         """Add a frame of ``side`` (LEFT or RIGHT)."""

@@ -26,8 +26,7 @@ from sepfm_ros.ros.image_conversion import (
 )
 
 H, W = 6, 10
-RNG = np.random.default_rng(0)
-BGR = RNG.integers(0, 256, size=(H, W, 3), dtype=np.uint8)
+BGR = np.random.default_rng(0).integers(0, 256, size=(H, W, 3), dtype=np.uint8)
 # the same with 0 and 255 in every channel, so that a range stretch maps it onto itself
 BGR_FULL = BGR.copy()
 BGR_FULL[0, 0], BGR_FULL[0, 1] = 0, 255
@@ -86,7 +85,8 @@ def test_mono8(encoding, pad):
 @pytest.mark.parametrize("bigendian", [False, True])
 @pytest.mark.parametrize("encoding", ["mono16", "16UC1"])
 def test_16bit_honours_byte_order_and_padding(encoding, bigendian, pad):
-    values = RNG.integers(0, 4096, size=(H, W), dtype=np.uint16)  # a 12-bit camera
+    rng = np.random.default_rng(1)
+    values = rng.integers(0, 4096, size=(H, W), dtype=np.uint16)  # a 12-bit camera
     stored = values.astype(">u2" if bigendian else "<u2")
     msg = make_msg(as_rows(stored), encoding, pad, bigendian=bigendian)
     raw = image_to_array(msg)
@@ -132,7 +132,7 @@ def pack_yuv422(y: np.ndarray, u: int, v: int, order: str) -> np.ndarray:
     [("yuv422", "uyvy"), ("uyvy", "uyvy"), ("yuv422_yuy2", "yuyv"), ("yuyv", "yuyv")],
 )
 def test_yuv422_luma_and_chroma_order(encoding, order):
-    y = RNG.integers(16, 236, size=(H, W), dtype=np.uint8)
+    y = np.random.default_rng(2).integers(16, 236, size=(H, W), dtype=np.uint8)
     msg = make_msg(pack_yuv422(y, 128, 128, order), encoding, pad=6)
     np.testing.assert_array_equal(image_to_numpy(msg, "mono8"), y)
     # strong blue chroma (U high, V low) must come out blue, not red
@@ -415,7 +415,7 @@ def test_numpy_to_image_round_trip(encoding):
     dtype = np.uint16 if encoding == "mono16" else np.uint8
     channels = {"mono8": 1, "bgr8": 3, "mono16": 1, "rgba8": 4}[encoding]
     shape = (H, W) if channels == 1 else (H, W, channels)
-    array = RNG.integers(0, 200, size=shape).astype(dtype)
+    array = np.random.default_rng(3).integers(0, 200, size=shape).astype(dtype)
     msg = numpy_to_image(array, encoding)
     np.testing.assert_array_equal(image_to_array(msg), array)
 

@@ -50,10 +50,15 @@ class CalibratedOutputs:
 
 
 def _same(a: CameraModel, b: CameraModel) -> bool:
+    """The same calibration, to rounding (drivers and tools recompute it for every message)."""
     return (
         a.size == b.size
         and a.distortion_model == b.distortion_model
-        and all(np.array_equal(getattr(a, f), getattr(b, f)) for f in ("K", "D", "R", "P"))
+        and all(
+            getattr(a, f).shape == getattr(b, f).shape
+            and np.allclose(getattr(a, f), getattr(b, f), rtol=1e-9, atol=1e-12)
+            for f in ("K", "D", "R", "P")
+        )
     )
 
 

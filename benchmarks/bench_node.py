@@ -244,6 +244,8 @@ class Feeder:
         self.node.create_subscription(
             DiagnosticArray, f"/{node_name}/estimate_info", self._on_info, qos
         )
+        self.health: dict[str, str] = {}  # the node's latest /diagnostics values
+        self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_health, qos)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
@@ -254,6 +256,12 @@ class Feeder:
             self.executor.spin()
         except Exception:  # noqa: BLE001 - shut down at exit
             pass
+
+    def _on_health(self, msg):
+        for status in msg.status:
+            if status.name.endswith(": node"):
+                with self.lock:
+                    self.health = {kv.key: kv.value for kv in status.values}
 
     def _on_info(self, msg):
         now = time.time()
@@ -346,10 +354,19 @@ def bench_node(mode, images, args, publisher_qos: str) -> None:
             msgs = [(msg(a),) for a in images]
         # warm-up until 3 answers (motion mode: the first frame has no pair, so no answer); one
         # frame counter throughout, so that a motion stream always pairs neighbouring views
-        frame, answered, deadline = 0, 0, time.monotonic() + 300.0
+        # (the node subscribes after loading its kernels, so it is warm by now)
+        frame, answered, deadline = 0, 0, time.monotonic() + 60.0
         while answered < 3:
             if time.monotonic() > deadline:
-                raise RuntimeError("the node does not answer")
+                with feeder.lock:
+                    health = dict(feeder.health)
+                got = {k: v for k, v in health.items() if k.startswith(("received_", "lost_"))}
+                reliability = {k: v for k, v in health.items() if "reliability" in k}
+                print(
+                    f"  node {publisher_qos:<14} answered {answered} of {frame} pairs in 60 s;"
+                    f" node: {got} {reliability}"
+                )
+                return
             stamp = time.time_ns()
             feeder.send(msgs[frame % len(msgs)], stamp)
             frame += 1

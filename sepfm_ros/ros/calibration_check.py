@@ -39,16 +39,10 @@ from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
-
-
-def info_topic_for(image_topic: str) -> str:
-    """The camera_info topic beside an image topic: ``/left/image_raw`` -> ``/left/camera_info``."""
-    base = image_topic.removesuffix("/compressed")
-    parent = base.rsplit("/", 1)[0] if "/" in base.strip("/") else ""
-    return f"{parent}/camera_info"
 
 
 @dataclass
@@ -102,10 +96,6 @@ def _monitor_config(args: argparse.Namespace) -> MonitorConfig:
     )
 
 
-def _stamp(msg: Any) -> int:
-    return int(msg.header.stamp.sec) * 1_000_000_000 + int(msg.header.stamp.nanosec)
-
-
 class _Rig:
     """The latest calibration of each side, rebuilt when a camera_info changes."""
 
@@ -137,8 +127,8 @@ class _Rig:
 def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
     """Check every stereo pair of the bag; print progress and figures. Raises BagError,
     CalibrationError or ValueError on bad input."""
-    left_info = args.left_info or info_topic_for(args.left)
-    right_info = args.right_info or info_topic_for(args.right)
+    left_info = args.left_info or camera_info_topic(args.left)
+    right_info = args.right_info or camera_info_topic(args.right)
     rectified = (
         args.rectified == "yes"
         or args.rectified == "auto"
@@ -179,7 +169,7 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
             if raw.topic in (left_info, right_info):
                 rig.infos[side] = msg
             else:
-                stamp = _stamp(msg)
+                stamp = stamp_ns(msg.header.stamp)
                 other = pending["right" if side == "left" else "left"]
                 if stamp in other:
                     mate = other.pop(stamp)

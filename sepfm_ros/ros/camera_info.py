@@ -15,6 +15,7 @@ from typing import Any
 
 from rclpy.node import Node
 
+from sepfm_ros.ros.messages import camera_info_topic as camera_info_beside
 from sepfm_ros.ros.subscriptions import InputSubscription
 
 CAMERA_INFO = "camera_info"
@@ -26,8 +27,7 @@ def camera_info_topic(node: Node, image_base: str) -> str:
     remapped = node.resolve_topic_name(own)
     if remapped != node.resolve_topic_name(own, only_expand=True):
         return remapped  # remapped by the user
-    image = node.resolve_topic_name(image_base)
-    return image.rsplit("/", 1)[0] + "/" + CAMERA_INFO
+    return camera_info_beside(node.resolve_topic_name(image_base))
 
 
 class CameraInfoInputs:

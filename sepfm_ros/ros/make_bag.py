@@ -39,7 +39,7 @@ from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.types import COMPRESSED_IMAGE, GROUND_TRUTH_TOPIC, IMAGE
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.image_conversion import numpy_to_compressed, numpy_to_image
-from sepfm_ros.ros.messages import fundamental_to_image
+from sepfm_ros.ros.messages import camera_info_topic, fundamental_to_image
 
 ENCODINGS = ("mono8", "bgr8", "compressed")
 SHARED_SEQUENCES = ("kitti_stereo", "kitti_motion", "templeRing")
@@ -131,11 +131,6 @@ def camera_info_message(calibration: Calibration, size: tuple[int, int], header:
     msg.r = [float(v) for v in calibration.R.reshape(-1)]
     msg.p = [float(v) for v in calibration.P.reshape(-1)]
     return msg
-
-
-def camera_info_topic(image_topic: str) -> str:
-    """``/left/image_raw`` -> ``/left/camera_info`` (the image_transport convention)."""
-    return image_topic.rsplit("/", 1)[0] + "/camera_info"
 
 
 @dataclass(frozen=True)

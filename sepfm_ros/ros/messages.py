@@ -57,6 +57,14 @@ def stamp_ns(stamp: Time) -> int:
     return int(stamp.sec) * 1_000_000_000 + int(stamp.nanosec)
 
 
+def camera_info_topic(image_topic: str) -> str:
+    """The ``camera_info`` topic beside an image topic, as image_transport pairs them:
+    ``/left/image_raw`` (or ``/left/image_raw/compressed``) -> ``/left/camera_info``."""
+    base = image_topic.removesuffix("/compressed")
+    parent = base.rsplit("/", 1)[0] if "/" in base else ""
+    return parent + "/camera_info"
+
+
 def copy_header(header: Header) -> Header:
     """An independent copy of a std_msgs/Header."""
     return Header(

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import COMPRESSED_IMAGE, GROUND_TRUTH_TOPIC, IMAGE_TYPES
+from sepfm_ros.ros.messages import camera_info_topic
 
 COMPRESSED_SUFFIX = "/compressed"
 NOT_CAMERA_SUFFIXES = ("/fundamental", "/debug_image")
@@ -54,9 +55,7 @@ class InputSpec:
 
     def camera_info_topics(self) -> tuple[str, ...]:
         """The ``camera_info`` beside each input image topic (image_transport's convention)."""
-        bases = [t.removesuffix(COMPRESSED_SUFFIX) if self.transport == "compressed" else t
-                 for t in self.topics]  # fmt: skip
-        return tuple(b.rsplit("/", 1)[0] + "/camera_info" for b in bases)
+        return tuple(camera_info_topic(t) for t in self.topics)
 
     def rectified(self) -> bool:
         """The images are rectified (``image_rect`` topics)."""

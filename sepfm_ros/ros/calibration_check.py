@@ -38,7 +38,7 @@ from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
-from sepfm_ros.ros.image_conversion import ImageDecodeError, message_to_numpy
+from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
 
 IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
@@ -209,8 +209,7 @@ def _check_one(
 ) -> PairRow | None:
     """Check one stereo pair; None (with a printed reason) when its images cannot be decoded."""
     try:
-        img_l = message_to_numpy(msg_l, "mono8")
-        img_r = message_to_numpy(msg_r, "mono8")
+        img_l, img_r = pair_to_numpy(msg_l, msg_r, "mono8")  # one contrast for the pair
     except ImageDecodeError as err:
         print(f"pair at {format_stamp(stamp)}: skipped, {err}", file=out)
         return None

@@ -220,6 +220,7 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.serialization import deserialize_message
 
+    from sepfm_ros.geometry.calibration_check import LEVEL_NAMES
     from sepfm_ros.ros.results import calibrated_topics
 
     poses = [r.info for r in results if r.info and r.info.get("pose_status") == "ok"]
@@ -242,7 +243,7 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
             for raw in reader.messages([topic]):
                 last = deserialize_message(raw.data, DiagnosticStatus)
             if last is not None:
-                level = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}[last.level[0]]
+                level = LEVEL_NAMES[last.level[0]]
                 line += f"; calibration check {level}: {last.message}"
     return line
 

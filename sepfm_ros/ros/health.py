@@ -18,7 +18,6 @@ from typing import Any
 import numpy as np
 
 OK, WARN, ERROR = 0, 1, 2
-LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR"}
 INTERNAL_PREFIX = "internal_"  # error kinds of exceptions inside the node (ERROR level)
 
 # How often input silence is checked (a change of the health level is reported at once).

@@ -247,8 +247,15 @@ class Replayer:
                 )
         return lines
 
-    def wait_for_subscribers(self, topics: Sequence[str], timeout_s: float) -> None:
-        """Wait until every (published, i.e. remapped) topic in ``topics`` has a subscriber."""
+    def wait_for_subscribers(
+        self, topics: Sequence[str], timeout_s: float, settle_s: float = 0.5
+    ) -> None:
+        """Wait until every (published, i.e. remapped) topic in ``topics`` has a subscriber.
+
+        The publisher sees a subscriber a moment before the subscriber has matched the
+        publisher, and a volatile subscriber drops what arrives in between: after the last
+        subscriber appears this waits ``settle_s`` more (seconds) so the first message is kept.
+        """
         pubs = {p.topic_name: p for p in self.publishers.values()}
         missing = [absolute_topic(t) for t in topics if absolute_topic(t) not in pubs]
         if missing:
@@ -257,6 +264,7 @@ class Replayer:
         while not self._stop.is_set():
             waiting = [t for t in topics if pubs[absolute_topic(t)].get_subscription_count() == 0]
             if not waiting:
+                self._stop.wait(settle_s)
                 return
             if time.monotonic() > deadline:
                 raise BagError(f"no subscriber on {', '.join(waiting)} after {timeout_s:.0f} s")

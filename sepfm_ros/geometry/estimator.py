@@ -25,7 +25,7 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.degeneracy import plane_and_parallax
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
+from sepfm_ros.geometry.fundamental_problem import LO_SCHEMES, FundamentalProblem
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
 from sepfm_ros.geometry.line_pairs import (
     LinePair,
@@ -71,6 +71,9 @@ class EstimatorOptions:
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
         plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
+        lo: local optimisation inside RANSAC, ``"sampson"`` (Sampson-weighted refits from 3x the
+            threshold down) or ``"plain"`` (least squares at 2x and 1x); see
+            ``fundamental_problem.LO_SCHEMES``.
     """
 
     max_samples: int = 10000
@@ -84,6 +87,7 @@ class EstimatorOptions:
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
+    lo: str = "sampson"
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -106,6 +110,8 @@ class EstimatorOptions:
                 raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
         if self.triple not in TRIPLES:
             raise ValueError(f"triple must be one of {TRIPLES}, got {self.triple!r}")
+        if self.lo not in LO_SCHEMES:
+            raise ValueError(f"lo must be one of {tuple(LO_SCHEMES)}, got {self.lo!r}")
 
     @classmethod
     def from_kwargs(cls, base: EstimatorOptions | None = None, **kwargs: Any) -> EstimatorOptions:
@@ -370,7 +376,9 @@ class _Problem:
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``)."""
-        arm = FundamentalProblem(self.data, self.solver, self.threshold, self.scoring)
+        arm = FundamentalProblem(
+            self.data, self.solver, self.threshold, self.scoring, lo=self.opt.lo
+        )
         return run_ransac([arm], self.rng, self.confidence, self.opt.max_samples, initial=initial)
 
 
@@ -453,7 +461,9 @@ def _stage2_arm(
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
     fits.append(fit)
-    return FundamentalProblem(d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool)
+    return FundamentalProblem(
+        d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool, lo=opt.lo
+    )
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:

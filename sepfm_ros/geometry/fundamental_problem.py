@@ -51,9 +51,15 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven):
     return F[:n_out], out_sid[:n_out]
 
 
-#: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the
-#: Sampson refinement is left to the final model).
-LO_FACTORS = (2.0, 1.0)
+#: Local optimisation inside RANSAC: inlier-threshold factors (loosest first) and Sampson IRLS
+#: iterations per refit. ``"sampson"``: each refit is Sampson-weighted, from 3x the threshold
+#: down (on forward motion, where points near the epipole fit many wrong F, plain least squares
+#: stops in a wrong basin: median rotation error on consecutive KITTI frames 0.081 -> 0.053 deg);
+#: ``"plain"``: unweighted least squares at 2x and 1x the threshold.
+LO_SCHEMES: dict[str, tuple[tuple[float, ...], int]] = {
+    "sampson": ((3.0, 2.0, 1.5, 1.0), 2),
+    "plain": ((2.0, 1.0), 0),
+}
 
 
 def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
@@ -81,6 +87,7 @@ class FundamentalProblem:
             line correspondences, or all line correspondences (f >= 3) as a least-squares block
             that fixes the same 3 degrees of freedom with the noise averaged.
         pool: indices of ``data`` eligible for sampling (default: all).
+        lo: local optimisation scheme, a key of :data:`LO_SCHEMES`.
     """
 
     def __init__(
@@ -92,7 +99,13 @@ class FundamentalProblem:
         fixed1: np.ndarray | None = None,
         fixed2: np.ndarray | None = None,
         pool: np.ndarray | None = None,
+        lo: str = "sampson",
     ) -> None:
+        if lo not in LO_SCHEMES:
+            raise ValueError(
+                f"unknown local optimisation {lo!r}; expected one of {list(LO_SCHEMES)}"
+            )
+        self.lo_factors, self.lo_irls = LO_SCHEMES[lo]
         if solver not in ("seven", "eight"):
             raise ValueError(f"unknown solver {solver!r}")
         if scoring not in SCORINGS:
@@ -128,5 +141,6 @@ class FundamentalProblem:
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
         return iterative_refit(
-            model, self.data, self.threshold, factors=LO_FACTORS, irls_iterations=0
-        )
+            model, self.data, self.threshold, factors=self.lo_factors,
+            irls_iterations=self.lo_irls,
+        )  # fmt: skip

@@ -189,3 +189,21 @@ def test_duplicate_check_exact_on_ties():
     with pytest.raises(ValueError, match=r"2 duplicate correspondences \(e\.g\. the matches at "
                        r"indices (17 and 41|17 and 50|41 and 50) are"):  # fmt: skip
         estimate_fundamental(p1, p2, (640, 480), method="ransac8", seed=0)
+
+
+@pytest.mark.parametrize("method", ["sep4", "sep5", "ransac7"])
+def test_one_sample_budget_per_call_shared_by_every_stage(method):
+    # 85 % outliers and a cap of 2,000 samples: stage 2 cannot converge; the fallback must run
+    # on what is left of the same budget, not on a fresh max_samples.
+    sp = make_pair(n_inliers=40, n_outliers=300, n_lines=2, noise=0.3, seed=3)
+    est = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method=method, seed=0, max_samples=2000
+    )
+    assert 0 < est.samples <= 2000
+    if method.startswith("sep"):
+        assert est.stage1_hypotheses > 0  # stage 1 drew from the same budget
+    # a tiny budget is honoured too (stage 1 alone would otherwise draw up to 2 x 200)
+    small = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method=method, seed=0, max_samples=50
+    )
+    assert 0 < small.samples <= 50

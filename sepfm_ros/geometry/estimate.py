@@ -27,6 +27,8 @@ class Estimate:
             those of its correspondence on line 2, up to scale.
         control_points: ((2, 2), (2, 2)) the control points c1, c2 of line 1 and of line 2 in
             pixels (where the lines meet the image borders), or None.
+        samples: minimal samples drawn, every stage together (stage 1's 3-point samples,
+            stage 2, fallback); at most the ``max_samples`` option.
         fallback: True when standard RANSAC ran because no usable line pair was found.
         status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
         method: the method name that produced this estimate.
@@ -42,6 +44,7 @@ class Estimate:
     line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     H_e: np.ndarray | None = None
     control_points: tuple[np.ndarray, np.ndarray] | None = None
+    samples: int = 0
     fallback: bool = False
     status: str = "ok"
     method: str = ""

@@ -34,7 +34,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import RaceOptions, RansacResult, run_ransac
+from sepfm_ros.geometry.ransac import Budget, RaceOptions, RansacResult, run_ransac
 from sepfm_ros.geometry.refine import iterative_refit
 
 # method -> (separable?, solver, scoring)
@@ -49,6 +49,8 @@ _METHODS: dict[str, tuple[bool, str, str]] = {
 }
 METHODS = tuple(_METHODS)
 TRIPLES = ("raw", "synthesized", "all")
+#: Most 3-point samples of stage 1 per line pair and control-point orientation (two orientations).
+STAGE1_MAX_SAMPLES = 200
 
 
 @dataclass(frozen=True)
@@ -59,7 +61,9 @@ class EstimatorOptions:
     object is made; bad values raise ``ValueError``.
 
     Attributes:
-        max_samples: cap on RANSAC samples (stage 2 or standard), all racing arms together.
+        max_samples: cap on the samples of one estimate, shared by all its stages (the
+            separable method's 3-point samples of stage 1, stage 2's racing arms and the
+            fallback), so a separable method draws no more than a baseline may.
         refine: Sampson (IRLS) refinement of the final model.
         hough_width: working resolution of the line search, px.
         hough_min_votes: least votes of a Hough line.
@@ -342,7 +346,8 @@ def estimate_fundamental(
     reason = _degeneracy(p1, p2, threshold)
     if reason is None:
         data = Correspondences.from_pixels(p1, p2)
-        problem = _Problem(data, solver, scoring, threshold, confidence, opt, rng)
+        budget = Budget(opt.max_samples)
+        problem = _Problem(data, solver, scoring, threshold, confidence, opt, rng, budget)
         if separable:
             result = _separable(problem, est, size1, size2)
         else:
@@ -351,6 +356,7 @@ def estimate_fundamental(
             est.stage2_hypotheses = result.hypotheses
             est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
         est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
+        est.samples = budget.used
         if result.model is None:
             reason = "no model: every sample was degenerate"
         else:
@@ -373,13 +379,18 @@ class _Problem:
     confidence: float
     opt: EstimatorOptions
     rng: np.random.Generator
+    budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
-        """Standard RANSAC over all matches (optionally starting from ``initial``)."""
+        """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
+        left of the budget."""
         arm = FundamentalProblem(
             self.data, self.solver, self.threshold, self.scoring, lo=self.opt.lo
         )
-        return run_ransac([arm], self.rng, self.confidence, self.opt.max_samples, initial=initial)
+        return run_ransac(
+            [arm], self.rng, self.confidence, self.opt.max_samples, initial=initial,
+            budget=self.budget,
+        )  # fmt: skip
 
 
 def _separable(
@@ -410,8 +421,9 @@ def _separable(
                 yield arm
 
     result = run_ransac(
-        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions()
-    )
+        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
+        budget=problem.budget,
+    )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
     if fits and result.leader >= 0:
         best = fits[result.leader]
@@ -421,8 +433,8 @@ def _separable(
         est.control_points = (best.ctrl1, best.ctrl2)
     est.timings_ms["stage1"] = 1e3 * stage1_s[0]
     est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t1 - stage1_s[0])
-    if fits and result.converged:
-        return result
+    if fits and (result.converged or problem.budget.left() == 0):
+        return result  # converged, or the budget is spent: no fallback beyond max_samples
     t3 = time.perf_counter()
     initial = None
     if fits and result.model is not None:
@@ -446,12 +458,16 @@ def _stage2_arm(
     """Stage 1 on ``pair``; its stage-2 arm (appending the fit to ``fits``), or None when
     stage 1 fails or too few matches lie off the pair to sample from."""
     d, opt = problem.data, problem.opt
+    left = problem.budget.left()
+    if left < 2:
+        return None
     fit, h = fit_line_homography(
         pair, d.pts1, d.pts2, size1, size2, scales[0], scales[1], problem.rng,
         threshold=opt.line_threshold, confidence=problem.confidence,
-        min_inliers=opt.min_line_inliers,
+        min_inliers=opt.min_line_inliers, max_samples=min(STAGE1_MAX_SAMPLES, left // 2),
     )  # fmt: skip
     est.stage1_hypotheses += h
+    problem.budget.spend(h)  # one H_e hypothesis per 3-point sample
     if fit is None:
         return None
     off_pair = np.ones(len(d), dtype=bool)

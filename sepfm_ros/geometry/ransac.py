@@ -108,6 +108,28 @@ class RaceOptions:
 
 
 @dataclass
+class Budget:
+    """Samples one estimate may draw, shared by every stage that draws them (the separable
+    method's stage 1 and stage 2, and its fallback), so no method gets more than ``limit``.
+
+    Attributes:
+        limit: samples allowed in all (minimal samples of every stage).
+        used: samples drawn so far.
+    """
+
+    limit: int
+    used: int = 0
+
+    def left(self) -> int:
+        """Samples still allowed (>= 0)."""
+        return max(0, self.limit - self.used)
+
+    def spend(self, n: int) -> None:
+        """Record ``n`` samples drawn."""
+        self.used += int(n)
+
+
+@dataclass
 class RansacResult:
     model: Any
     cost: float
@@ -175,10 +197,12 @@ class _Run:
         batch: int,
         extra_lo_ratio: float,
         max_extra_lo: int,
+        budget: Budget,
     ) -> None:
         self.source = iter(arms)
         self.rng, self.confidence, self.race, self.batch = rng, confidence, race, batch
         self.max_samples, self.min_samples = max_samples, min_samples
+        self.budget = budget
         self.extra_lo_ratio, self.max_extra_lo = extra_lo_ratio, max_extra_lo
         self.arms: list[_Arm] = []
         self.active: list[int] = []
@@ -257,7 +281,7 @@ class _Run:
                 break
             # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
             b = max(1, min(need - done, self.batch, pace))
-            b = min(b, self.max_samples - self.total)
+            b = min(b, self.budget.left())
             if b > 0:
                 self.sample_arm(a, b)
 
@@ -273,6 +297,7 @@ class _Run:
         smp = draw_samples(self.rng, arm.problem.pool, arm.problem.sample_size, b)
         arm.samples += b
         self.total += b
+        self.budget.spend(b)
         models, _ = arm.problem.solve(smp)
         if len(models) == 0:
             return
@@ -328,7 +353,7 @@ class _Run:
             if self.converged():
                 converged = True
                 break
-            if self.total >= self.max_samples:
+            if self.budget.left() <= 0:
                 break
             self.drop_lagging()
             self.join_on_schedule()
@@ -355,6 +380,7 @@ def run_ransac(
     initial: tuple[Any, float, int] | None = None,
     extra_lo_ratio: float = 0.6,
     max_extra_lo: int = 10,
+    budget: Budget | None = None,
 ) -> RansacResult:
     """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
 
@@ -379,10 +405,13 @@ def run_ransac(
             arm 0's model.
         extra_lo_ratio, max_extra_lo: up to ``max_extra_lo`` further local optimisations of
             models whose support reaches ``extra_lo_ratio`` of their arm's best raw support.
+        budget: a :class:`Budget` shared with other stages of the same estimate; the loop stops
+            when it is spent (default: a fresh budget of ``max_samples``). ``max_samples`` still
+            caps F(k, r).
     """
     run = _Run(
         arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,
-        extra_lo_ratio, max_extra_lo,
+        extra_lo_ratio, max_extra_lo, budget or Budget(max_samples),
     )  # fmt: skip
     run.join()
     if initial is not None and run.arms:

@@ -34,7 +34,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import RaceOptions, RansacResult, run_ransac
+from sepfm_ros.geometry.ransac import RaceOptions, RansacResult, SamplingOptions, run_ransac
 from sepfm_ros.geometry.refine import iterative_refit
 
 # method -> (separable?, solver, scoring)
@@ -71,6 +71,9 @@ class EstimatorOptions:
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
         plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
+        prosac: PROSAC sampling (best matches first) in every RANSAC loop (ransac.py).
+        sprt: SPRT early rejection of minimal-sample models (Matas & Chum) in every loop.
+        bailout: exact early rejection of minimal-sample models that cannot matter.
     """
 
     max_samples: int = 10000
@@ -84,6 +87,9 @@ class EstimatorOptions:
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
+    prosac: bool = False
+    sprt: bool = False
+    bailout: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -115,6 +121,10 @@ class EstimatorOptions:
         if unknown:
             raise ValueError(f"unknown options {sorted(unknown)}; known: {sorted(known)}")
         return replace(base or cls(), **kwargs)
+
+    def sampling(self) -> SamplingOptions:
+        """PROSAC / SPRT / bail-out options of the RANSAC loops."""
+        return SamplingOptions(prosac=self.prosac, sprt=self.sprt, bailout=self.bailout)
 
     def line_search(self) -> LineSearchOptions:
         """Options of the line-pair search (two pairs beyond those that race, as spares)."""
@@ -371,7 +381,10 @@ class _Problem:
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``)."""
         arm = FundamentalProblem(self.data, self.solver, self.threshold, self.scoring)
-        return run_ransac([arm], self.rng, self.confidence, self.opt.max_samples, initial=initial)
+        return run_ransac(
+            [arm], self.rng, self.confidence, self.opt.max_samples, initial=initial,
+            sampling=self.opt.sampling(),
+        )  # fmt: skip
 
 
 def _separable(
@@ -402,8 +415,9 @@ def _separable(
                 yield arm
 
     result = run_ransac(
-        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions()
-    )
+        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
+        sampling=opt.sampling(),
+    )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
     if fits and result.leader >= 0:
         best = fits[result.leader]

@@ -116,8 +116,10 @@ def sprt_msac_kernel(
     log((1 - delta) / (1 - epsilon)) per outlier; the model is rejected as soon as it exceeds
     ``log_A`` (pass inf to disable). Bail-out: rejected as soon as its partial cost reaches
     ``bail_cost`` while even all unread points being inliers would keep its count below
-    ``bail_count`` (pass inf / 0 to disable); such a model can neither beat ``bail_cost`` nor reach
-    ``bail_count``, so the bail-out never changes what a caller using those two bounds decides.
+    ``bail_count`` (pass inf / 0 to disable), and its partial cost exceeds the full cost of an
+    earlier model of this call; such a model can neither beat ``bail_cost``, nor reach
+    ``bail_count``, nor be this call's cheapest model, so the bail-out never changes what a
+    caller deciding by those bounds and by the cheapest model decides.
 
     Returns (cost (M,), inf when rejected, else exactly :func:`msac_kernel`'s cost (summed in
     index order); inlier count (M,), of the points read when rejected; points read (M,);
@@ -130,6 +132,7 @@ def sprt_msac_kernel(
     read = np.zeros(M, dtype=np.int64)
     rejected = np.zeros(M, dtype=np.bool_)
     per_point = np.empty(N)
+    batch_best = np.inf  # cheapest full cost of this call so far
     for m in range(M):
         f = F[m]
         c = 0.0
@@ -154,7 +157,7 @@ def sprt_msac_kernel(
                 rejected[m] = True
                 stop = True
                 break
-            if c >= bail_cost and k + (N - j) < bail_count:
+            if c >= bail_cost and c > batch_best and k + (N - j) < bail_count:
                 stop = True
                 break
         read[m] = j
@@ -166,6 +169,7 @@ def sprt_msac_kernel(
             for i in range(N):  # the same summation order as msac_kernel: bit-identical cost
                 c += per_point[i]
             cost[m] = c
+            batch_best = min(batch_best, c)
     return cost, count, read, rejected
 
 

@@ -272,9 +272,12 @@ class _Sprt:
     points). Keeps epsilon (best model's inlier ratio), delta (inliers per point read in
     SPRT-rejected models) and the threshold A; counts points read."""
 
-    def __init__(self, options: SamplingOptions, n: int, rng: np.random.Generator) -> None:
+    def __init__(self, options: SamplingOptions, n: int) -> None:
         self.opt = options
-        self.order = rng.permutation(n).astype(np.int64)
+        # a fixed pseudo-random reading order: the points come best first, and reading them in
+        # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
+        # the bail-out alone reproduces the plain run exactly
+        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
         self.delta = options.sprt_delta
         self.epsilon = 0.0
         self.A = np.inf
@@ -367,7 +370,7 @@ class _Run:
             growth = opt.prosac_growth or self.max_samples
             arm.sampler = ProsacSampler(problem.pool, problem.sample_size, growth)
         if (opt.sprt or opt.bailout) and self.sprt is None:
-            self.sprt = _Sprt(opt, problem.n, self.rng)
+            self.sprt = _Sprt(opt, problem.n)
         self.arms.append(arm)
         self.active.append(len(self.arms) - 1)
         return True

@@ -96,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
             rows.setdefault((name, "-"), []).append((ok, met.f_score, np.nan, ms))
         sys.stderr.write(f"\r  {i + 1}/{len(pairs)} pairs, {time.time() - t0:.0f} s")
     sys.stderr.write("\n")
-    print(f"{len(pairs)} pairs, SIFT ratio {a.ratio}, extra outliers to {a.outliers}, seed {a.seed}")
+    print(f"{len(pairs)} pairs, SIFT {a.ratio}, extra outliers to {a.outliers}, seed {a.seed}")
     print("| method | sampling | success % | F-score | hypotheses (median) | ms (median) |")
     print("|---|---|---|---|---|---|")
     for (name, cfg), r in rows.items():

@@ -601,8 +601,8 @@ def run_ransac(
     sampling: it is exact once the schedule has reached the whole pool, and before that it is
     conservative as long as the top of the pool is at least as clean as the whole (the point
     of ordering by quality); the schedule's T_N defaults to ``max_samples``, so a run that does
-    not converge has just grown to the whole pool when it stops. With the SPRT the all-inlier probability of F(k, r) is
-    scaled by 1 - 1/A, the chance that the SPRT accepts a good model.
+    not converge has just grown to the whole pool when it stops. With the SPRT the all-inlier
+    probability of F(k, r) is scaled by 1 - 1/A, the chance that the SPRT accepts a good model.
     """
     run = _Run(
         arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,

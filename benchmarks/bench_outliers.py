@@ -7,7 +7,8 @@ each target. Printed per target: success (median GT-inlier error < 1 px), F-scor
 inliers, and hypotheses of sep4 / sep5 / ransac7 / ransac8 (median and the median per-pair ratio
 sep4 / ransac7 over the runs where a line pair was used).
 
-    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--write-docs]
+    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--options prosac=1]
+        [--write-docs]
 
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
 """
@@ -52,9 +53,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rates", default="0.5,0.65,0.8")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument(
+        "--options", default="", help="EstimatorOptions as name=int pairs, e.g. prosac=1,sprt=1"
+    )
+    ap.add_argument(
         "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
     )
     a = ap.parse_args(argv)
+    options = {k: int(v) for k, v in (kv.split("=") for kv in a.options.split(",") if kv)}
     if not (DATA / "pairs.json").is_file():
         print(f"shared data not found at {DATA}", file=sys.stderr)
         return 2
@@ -76,7 +81,9 @@ def main(argv: list[str] | None = None) -> int:
             pos = positives(pair.F_gt, pa, pb)
             for name in METHODS:
                 t = time.perf_counter()
-                e = estimate_fundamental(pa, pb, m.size_a, m.size_b, method=name, seed=a.seed)
+                e = estimate_fundamental(
+                    pa, pb, m.size_a, m.size_b, method=name, seed=a.seed, **options
+                )
                 ms = (time.perf_counter() - t) * 1e3
                 met = run_metrics(e.F, pa, pb, pos, 1.0)
                 ok = e.F is not None and met.median_error < 1.0 and not met.failed

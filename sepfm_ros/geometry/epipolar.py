@@ -96,6 +96,83 @@ def msac_kernel(
     return cost, count
 
 
+@numba.njit(cache=True, nogil=True)
+def sprt_msac_kernel(
+    F: np.ndarray,
+    X1: np.ndarray,
+    X2: np.ndarray,
+    threshold: float,
+    order: np.ndarray,
+    log_A: float,
+    log_in: float,
+    log_out: float,
+    bail_cost: float,
+    bail_count: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """MSAC score of (M, 3, 3) models with early rejection (SPRT and a bail-out).
+
+    Points are read in ``order`` (a permutation of range(N)). SPRT (Matas & Chum): the log
+    likelihood ratio grows by ``log_in`` = log(delta / epsilon) per inlier and ``log_out`` =
+    log((1 - delta) / (1 - epsilon)) per outlier; the model is rejected as soon as it exceeds
+    ``log_A`` (pass inf to disable). Bail-out: rejected as soon as its partial cost reaches
+    ``bail_cost`` while even all unread points being inliers would keep its count below
+    ``bail_count`` (pass inf / 0 to disable), and its partial cost exceeds the full cost of an
+    earlier model of this call; such a model can neither beat ``bail_cost``, nor reach
+    ``bail_count``, nor be this call's cheapest model, so the bail-out never changes what a
+    caller deciding by those bounds and by the cheapest model decides.
+
+    Returns (cost (M,), inf when rejected, else exactly :func:`msac_kernel`'s cost (summed in
+    index order); inlier count (M,), of the points read when rejected; points read (M,);
+    rejected by SPRT (M,) bool). A model rejected by the bail-out has cost inf and rejected False.
+    """
+    M, N = F.shape[0], X1.shape[1]
+    t2 = threshold * threshold
+    cost = np.empty(M)
+    count = np.zeros(M, dtype=np.int64)
+    read = np.zeros(M, dtype=np.int64)
+    rejected = np.zeros(M, dtype=np.bool_)
+    per_point = np.empty(N)
+    batch_best = np.inf  # cheapest full cost of this call so far
+    for m in range(M):
+        f = F[m]
+        c = 0.0
+        k = 0
+        llr = 0.0
+        stop = False
+        j = 0
+        while j < N:
+            i = order[j]
+            d = _distance_one(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i])
+            j += 1
+            if d < threshold:
+                e = d * d
+                k += 1
+                llr += log_in
+            else:
+                e = t2
+                llr += log_out
+            per_point[i] = e
+            c += e
+            if llr > log_A:
+                rejected[m] = True
+                stop = True
+                break
+            if c >= bail_cost and c > batch_best and k + (N - j) < bail_count:
+                stop = True
+                break
+        read[m] = j
+        count[m] = k
+        if stop:
+            cost[m] = np.inf
+        else:
+            c = 0.0
+            for i in range(N):  # the same summation order as msac_kernel: bit-identical cost
+                c += per_point[i]
+            cost[m] = c
+            batch_best = min(batch_best, c)
+    return cost, count, read, rejected
+
+
 @numba.njit(cache=True, nogil=True, inline="always")
 def to_unit_norm(G: np.ndarray) -> bool:
     """Scale G (3, 3) in place to unit Frobenius norm; False (G unchanged) if zero or not finite."""

@@ -34,7 +34,13 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import Budget, RaceOptions, RansacResult, run_ransac
+from sepfm_ros.geometry.ransac import (
+    Budget,
+    RaceOptions,
+    RansacResult,
+    SamplingOptions,
+    run_ransac,
+)
 from sepfm_ros.geometry.refine import iterative_refit
 
 # method -> (separable?, solver, scoring)
@@ -78,6 +84,9 @@ class EstimatorOptions:
         lo: local optimisation inside RANSAC, ``"sampson"`` (Sampson-weighted refits from 3x the
             threshold down) or ``"plain"`` (least squares at 2x and 1x); see
             ``fundamental_problem.LO_SCHEMES``.
+        prosac: PROSAC sampling (best matches first) in every RANSAC loop (ransac.py).
+        sprt: SPRT early rejection of minimal-sample models (Matas & Chum) in every loop.
+        bailout: exact early rejection of minimal-sample models that cannot matter.
     """
 
     max_samples: int = 10000
@@ -92,6 +101,9 @@ class EstimatorOptions:
     triple: str = "raw"
     plane_check: bool = True
     lo: str = "sampson"
+    prosac: bool = False
+    sprt: bool = False
+    bailout: bool = False
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -125,6 +137,10 @@ class EstimatorOptions:
         if unknown:
             raise ValueError(f"unknown options {sorted(unknown)}; known: {sorted(known)}")
         return replace(base or cls(), **kwargs)
+
+    def sampling(self) -> SamplingOptions:
+        """PROSAC / SPRT / bail-out options of the RANSAC loops."""
+        return SamplingOptions(prosac=self.prosac, sprt=self.sprt, bailout=self.bailout)
 
     def line_search(self) -> LineSearchOptions:
         """Options of the line-pair search (two pairs beyond those that race, as spares)."""
@@ -390,6 +406,7 @@ class _Problem:
         return run_ransac(
             [arm], self.rng, self.confidence, self.opt.max_samples, initial=initial,
             budget=self.budget,
+            sampling=self.opt.sampling(),
         )  # fmt: skip
 
 
@@ -423,6 +440,7 @@ def _separable(
     result = run_ransac(
         stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
         budget=problem.budget,
+        sampling=opt.sampling(),
     )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
     if fits and result.leader >= 0:

@@ -11,7 +11,12 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.epipolar import apply_transform, denormalize_kernel, msac_kernel
+from sepfm_ros.geometry.epipolar import (
+    apply_transform,
+    denormalize_kernel,
+    msac_kernel,
+    sprt_msac_kernel,
+)
 from sepfm_ros.geometry.refine import iterative_refit
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
@@ -137,6 +142,28 @@ class FundamentalProblem:
         if self.scoring == "msac":  # compiled, no (K, N) distance matrix
             return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
         return score_distances(self.distances(models), self.threshold, self.scoring)
+
+    def score_early(
+        self,
+        models: np.ndarray,
+        order: np.ndarray,
+        log_A: float,
+        log_in: float,
+        log_out: float,
+        bail_cost: float,
+        bail_count: int,
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`score` with early rejection (SPRT / bail-out, see
+        :func:`~sepfm_ros.geometry.epipolar.sprt_msac_kernel`): (cost, inf when rejected;
+        inlier count; points read; rejected by the SPRT). LMedS scores every point."""
+        if self.scoring != "msac":
+            cost, count = self.score(models)
+            M = len(models)
+            return cost, count, np.full(M, self.n, dtype=np.int64), np.zeros(M, dtype=bool)
+        return sprt_msac_kernel(
+            models, self.data.X1, self.data.X2, self.threshold, order, log_A, log_in, log_out,
+            bail_cost, bail_count,
+        )  # fmt: skip
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""

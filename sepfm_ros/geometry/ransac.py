@@ -139,6 +139,8 @@ class RansacResult:
     samples: list[int] = field(default_factory=list)  #: samples drawn per arm
     dropped: list[int] = field(default_factory=list)  #: arms dropped for lagging support
     converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
+    points_read: int = 0  #: points verified for minimal-sample models (SPRT / bail-out only)
+    rejected: int = 0  #: minimal-sample models rejected by the SPRT
 
 
 @numba.njit(cache=True, nogil=True)
@@ -170,6 +172,166 @@ def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> 
     return pool[_floyd_samples(rng.random((b, k)), P)]
 
 
+def prosac_schedule(P: int, k: int, growth: int) -> np.ndarray:
+    """PROSAC's T'_n for n = k .. P (Chum & Matas 2005), as an int64 array indexed n - k.
+
+    T_n = growth * C(n, k) / C(P, k) is the expected number, among ``growth`` uniform samples
+    of the whole pool, of samples drawn from the top n; T'_k = 1 and T'_{n+1} = T'_n +
+    ceil(T_{n+1} - T_n), so every n gets at least one sample. Sample t (1-based) with
+    T'_{n-1} < t <= T'_n is the n-th entry plus k - 1 drawn from the top n - 1.
+    """
+    if P < k:
+        raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
+    T = float(growth)
+    for i in range(k):
+        T *= (k - i) / (P - i)  # T_k
+    out = np.empty(P - k + 1, dtype=np.int64)
+    out[0] = 1
+    for n in range(k, P):
+        T_next = T * (n + 1) / (n + 1 - k)
+        out[n - k + 1] = out[n - k] + max(1, int(np.ceil(T_next - T)))
+        T = T_next
+    return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _prosac_samples(u: np.ndarray, t0: int, P: int, schedule: np.ndarray) -> np.ndarray:
+    """(b, k) PROSAC samples t0 + 1 .. t0 + b (positions in the quality-ordered pool) from
+    (b, k) uniforms; uniform over range(P) (Floyd) once t exceeds the schedule's last T'_P."""
+    b, k = u.shape
+    out = np.empty((b, k), dtype=np.int64)
+    n = k
+    last = schedule.shape[0] - 1
+    for i in range(b):
+        t = t0 + i + 1
+        while n - k < last and schedule[n - k] < t:
+            n += 1
+        if schedule[n - k] < t:  # past the schedule: plain RANSAC over the whole pool
+            top, forced = P, -1
+        else:
+            top, forced = n - 1, n - 1
+        first = 0
+        if forced >= 0:
+            out[i, 0] = forced
+            first = 1
+        kk = k - first
+        for m in range(kk):  # Floyd: a uniform kk-subset of range(top)
+            j = top - kk + m
+            v = min(int(u[i, m] * (j + 1)), j)
+            for q in range(first, first + m):
+                if out[i, q] == v:
+                    v = j
+                    break
+            out[i, first + m] = v
+    return out
+
+
+class ProsacSampler:
+    """PROSAC over a pool ordered best first: deterministic given the generator's state.
+
+    Args:
+        pool: (P,) indices, best first.
+        k: sample size.
+        growth: T_N, the number of samples after which PROSAC has grown to the whole pool and
+            sampling is uniform (plain RANSAC).
+    """
+
+    def __init__(self, pool: np.ndarray, k: int, growth: int) -> None:
+        self.pool, self.k = pool, k
+        self.schedule = prosac_schedule(len(pool), k, growth)
+        self.t = 0  #: samples drawn so far
+
+    def top(self, t: int) -> int:
+        """Size of the top of the pool that sample t (1-based) is drawn from."""
+        n = int(np.searchsorted(self.schedule, t)) + self.k
+        return min(n, len(self.pool))
+
+    def draw(self, rng: np.random.Generator, b: int) -> np.ndarray:
+        """(b, k) next samples (entries of the pool)."""
+        idx = _prosac_samples(rng.random((b, self.k)), self.t, len(self.pool), self.schedule)
+        self.t += b
+        return self.pool[idx]
+
+
+@dataclass
+class SamplingOptions:
+    """Sampling and verification variants of :func:`run_ransac` (all off: plain RANSAC).
+
+    Attributes:
+        prosac: PROSAC sampling of each arm's pool in its order (best first); the adaptive
+            stopping is still F(k, r) over all samples drawn (see docs in run_ransac).
+        prosac_growth: T_N of the PROSAC schedule; 0 means ``max_samples``.
+        sprt: Wald's SPRT on minimal-sample models (Matas & Chum 2008), with epsilon the best
+            model's inlier ratio and delta the inlier ratio seen in rejected models.
+        bailout: reject a minimal-sample model as soon as it can neither beat its arm's best
+            cost nor reach the support that would earn it a local optimisation (exact).
+        sprt_model_time: t_M, the time to draw and solve one sample in units of one point's
+            verification, in the SPRT's threshold A.
+        sprt_delta: initial delta (probability that a point is consistent with a bad model).
+    """
+
+    prosac: bool = False
+    prosac_growth: int = 0
+    sprt: bool = False
+    bailout: bool = False
+    sprt_model_time: float = 200.0
+    sprt_delta: float = 0.01
+
+
+def sprt_threshold(epsilon: float, delta: float, model_time: float, models_per_sample: float):
+    """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
+    A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
+    C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)
+    A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0
+    A = A0
+    for _ in range(20):
+        A = A0 + np.log(A)
+    return float(A)
+
+
+class _Sprt:
+    """Adaptive SPRT / bail-out state of one run (shared by the arms: they score the same
+    points). Keeps epsilon (best model's inlier ratio), delta (inliers per point read in
+    SPRT-rejected models) and the threshold A; counts points read."""
+
+    def __init__(self, options: SamplingOptions, n: int) -> None:
+        self.opt = options
+        # a fixed pseudo-random reading order: the points come best first, and reading them in
+        # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
+        # the bail-out alone reproduces the plain run exactly
+        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
+        self.delta = options.sprt_delta
+        self.epsilon = 0.0
+        self.A = np.inf
+        self.rej_inliers = 0
+        self.rej_read = 0
+        self.models = 0
+        self.samples = 0
+        self.points_read = 0  #: points verified by minimal-sample scoring (all models)
+        self.rejected = 0  #: models rejected by the SPRT
+
+    def update(self, best_count: int, n: int) -> None:
+        """New epsilon / delta: recompute A (SPRT off while epsilon <= 1.5 delta)."""
+        if not self.opt.sprt:
+            return
+        eps = min(best_count / n, 0.999) if n else 0.0
+        if self.rej_read >= 50:  # enough evidence to replace the initial delta
+            self.delta = min(0.5, max(1e-4, self.rej_inliers / self.rej_read))
+        self.epsilon = eps
+        if eps <= 1.5 * self.delta:
+            self.A = np.inf
+        else:
+            ms = self.models / self.samples if self.samples else 1.0
+            self.A = sprt_threshold(eps, self.delta, self.opt.sprt_model_time, ms)
+
+    def logs(self) -> tuple[float, float, float]:
+        """(log A, log(delta / eps), log((1 - delta) / (1 - eps))) for the kernel."""
+        if not np.isfinite(self.A):
+            return np.inf, 0.0, 0.0
+        d, e = self.delta, self.epsilon
+        return float(np.log(self.A)), float(np.log(d / e)), float(np.log((1 - d) / (1 - e)))
+
+
 @dataclass
 class _Arm:
     """Book-keeping of one arm during :func:`run_ransac`."""
@@ -181,6 +343,7 @@ class _Arm:
     cost: float = np.inf
     raw_count: int = 0
     checked: bool = False  #: its best model was locally optimised before a drop
+    sampler: ProsacSampler | None = None  #: PROSAC state (None: uniform sampling)
 
 
 class _Run:
@@ -198,8 +361,11 @@ class _Run:
         extra_lo_ratio: float,
         max_extra_lo: int,
         budget: Budget,
+        sampling: SamplingOptions,
     ) -> None:
         self.source = iter(arms)
+        self.sampling = sampling
+        self.sprt: _Sprt | None = None  # made when the first arm joins (it knows n)
         self.rng, self.confidence, self.race, self.batch = rng, confidence, race, batch
         self.max_samples, self.min_samples = max_samples, min_samples
         self.budget = budget
@@ -222,7 +388,14 @@ class _Run:
         problem = next(self.source, None)
         if problem is None:
             return False
-        self.arms.append(_Arm(problem))
+        arm = _Arm(problem)
+        opt = self.sampling
+        if opt.prosac:
+            growth = opt.prosac_growth or self.max_samples
+            arm.sampler = ProsacSampler(problem.pool, problem.sample_size, growth)
+        if (opt.sprt or opt.bailout) and self.sprt is None:
+            self.sprt = _Sprt(opt, problem.n)
+        self.arms.append(arm)
         self.active.append(len(self.arms) - 1)
         return True
 
@@ -235,6 +408,8 @@ class _Run:
         if cost[i] < self.best_cost:
             self.best_model, self.best_cost = models[i], float(cost[i])
             self.best_count, self.leader = int(count[i]), a
+            if self.sprt is not None:
+                self.sprt.update(self.best_count, arm.problem.n)
         return i
 
     def local_optimization(self, a: int, model: Any) -> None:
@@ -257,7 +432,13 @@ class _Run:
         """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``."""
         p = self.arms[a].problem
         count = max(self.best_count, 0)
-        need = trials_needed(p.sample_size, count, p.n, self.confidence, self.max_samples)
+        if self.sprt is not None and np.isfinite(self.sprt.A) and p.n > 0:
+            # SPRT rejects a good model with probability <= 1 / A: an all-inlier sample
+            # yields an accepted model with probability w^k (1 - 1/A) (Matas & Chum, eq. 3)
+            w = min(1.0, count / p.n) ** p.sample_size * (1.0 - 1.0 / self.sprt.A)
+            need = int(min(trial_count(1, w, self.confidence), float(self.max_samples)))
+        else:
+            need = trials_needed(p.sample_size, count, p.n, self.confidence, self.max_samples)
         return max(need, self.min_samples)
 
     def drop_after(self, a: int) -> float:
@@ -294,15 +475,23 @@ class _Run:
         to ``max_extra_lo`` models close to it.
         """
         arm = self.arms[a]
-        smp = draw_samples(self.rng, arm.problem.pool, arm.problem.sample_size, b)
+        if arm.sampler is not None:
+            smp = arm.sampler.draw(self.rng, b)
+        else:
+            smp = draw_samples(self.rng, arm.problem.pool, arm.problem.sample_size, b)
         arm.samples += b
         self.total += b
         self.budget.spend(b)
         models, _ = arm.problem.solve(smp)
+        if self.sprt is not None:
+            self.sprt.samples += b
+            self.sprt.models += len(models)
         if len(models) == 0:
             return
-        cost, count = arm.problem.score(models)
+        cost, count = self.score_minimal(a, models)
         i = self.offer(a, models, cost, count)
+        if self.sprt is not None and not np.isfinite(cost[i]):  # every model rejected early
+            return
         if cost[i] < arm.cost:
             arm.model, arm.cost = models[i], float(cost[i])
             arm.raw_count = int(count[i])
@@ -310,6 +499,30 @@ class _Run:
         elif self.extra_lo < self.max_extra_lo and count[i] >= self.extra_lo_ratio * arm.raw_count:
             self.extra_lo += 1
             self.local_optimization(a, models[i])
+
+    def score_minimal(self, a: int, models: Any) -> tuple[np.ndarray, np.ndarray]:
+        """Score minimal-sample models of arm ``a``: fully, or with SPRT / bail-out when on and
+        the problem supports it (rejected models: cost inf, count of the points read)."""
+        problem = self.arms[a].problem
+        sprt = self.sprt
+        if sprt is None or not hasattr(problem, "score_early"):
+            return problem.score(models)
+        arm = self.arms[a]
+        bail_cost, bail_count = np.inf, 0
+        if self.sampling.bailout and np.isfinite(arm.cost):
+            bail_cost = arm.cost
+            bail_count = arm.best_count + 1
+            if self.extra_lo < self.max_extra_lo:
+                bail_count = min(bail_count, int(np.ceil(self.extra_lo_ratio * arm.raw_count)))
+        cost, count, read, rejected = problem.score_early(
+            models, sprt.order, *sprt.logs(), bail_cost, bail_count
+        )
+        sprt.points_read += int(read.sum())
+        if rejected.any():
+            sprt.rejected += int(rejected.sum())
+            sprt.rej_inliers += int(count[rejected].sum())
+            sprt.rej_read += int(read[rejected].sum())
+        return cost, count
 
     def converged(self) -> bool:
         """The arms that agree with the best model drew F(k, r) samples together."""
@@ -366,6 +579,8 @@ class _Run:
             samples=[arm.samples for arm in self.arms],
             dropped=self.dropped,
             converged=converged,
+            points_read=self.sprt.points_read if self.sprt else 0,
+            rejected=self.sprt.rejected if self.sprt else 0,
         )
 
 
@@ -381,6 +596,7 @@ def run_ransac(
     extra_lo_ratio: float = 0.6,
     max_extra_lo: int = 10,
     budget: Budget | None = None,
+    sampling: SamplingOptions | None = None,
 ) -> RansacResult:
     """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
 
@@ -408,13 +624,23 @@ def run_ransac(
         budget: a :class:`Budget` shared with other stages of the same estimate; the loop stops
             when it is spent (default: a fresh budget of ``max_samples``). ``max_samples`` still
             caps F(k, r).
+        sampling: PROSAC / SPRT / bail-out (:class:`SamplingOptions`; default all off).
+
+    With PROSAC the stopping rule stays F(k, r) over all samples drawn, as for uniform
+    sampling: it is exact once the schedule has reached the whole pool, and before that it is
+    conservative as long as the top of the pool is at least as clean as the whole (the point
+    of ordering by quality); the schedule's T_N defaults to ``max_samples``, so a run that does
+    not converge has just grown to the whole pool when it stops. With the SPRT the all-inlier
+    probability of F(k, r) is scaled by 1 - 1/A, the chance that the SPRT accepts a good model.
     """
     run = _Run(
         arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,
-        extra_lo_ratio, max_extra_lo, budget or Budget(max_samples),
+        extra_lo_ratio, max_extra_lo, budget or Budget(max_samples), sampling or SamplingOptions(),
     )  # fmt: skip
     run.join()
     if initial is not None and run.arms:
         run.best_model, run.best_cost, run.best_count = initial
         run.leader = 0
+        if run.sprt is not None:
+            run.sprt.update(run.best_count, run.arms[0].problem.n)
     return run.run()

@@ -55,6 +55,8 @@ import bench_docs
 import cv2
 import numpy as np
 
+from sepfm_ros.geometry import DEFAULT_METHOD
+
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
 # scene -> (node mode, images): motion = one stream of frames (F between consecutive frames; the
@@ -423,7 +425,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--rate", type=float, default=30.0, help="paced input rate, pairs/s")
     parser.add_argument("--features", default="orb")
     parser.add_argument("--max-features", type=int, default=1000)
-    parser.add_argument("--method", default="sep5")
+    parser.add_argument("--method", default=DEFAULT_METHOD)
     parser.add_argument(
         "--param",
         action="append",

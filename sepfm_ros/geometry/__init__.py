@@ -2,11 +2,12 @@
 
 Public API::
 
-    estimate_fundamental(pts1, pts2, image_size1, image_size2=None, method="sep5",
+    estimate_fundamental(pts1, pts2, image_size1, image_size2=None, method=DEFAULT_METHOD,
                          threshold=1.0, confidence=0.99, seed=None, options=None,
                          **kwargs) -> Estimate
 
-with ``options`` an :class:`EstimatorOptions` and ``kwargs`` fields of it replacing its values,
+with ``DEFAULT_METHOD`` the best-measured method (``"sep4"``), ``options`` an
+:class:`EstimatorOptions` and ``kwargs`` fields of it replacing its values,
 and the helpers :func:`symmetric_epipolar_distance`, :func:`sampson_distance`,
 :func:`fundamental_from_cameras` and :func:`ransac_trials` (the paper's F(k, r)).
 No module below this package imports ROS.
@@ -19,10 +20,16 @@ from sepfm_ros.geometry.epipolar import (
     symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.estimate import Estimate
-from sepfm_ros.geometry.estimator import METHODS, EstimatorOptions, estimate_fundamental
+from sepfm_ros.geometry.estimator import (
+    DEFAULT_METHOD,
+    METHODS,
+    EstimatorOptions,
+    estimate_fundamental,
+)
 from sepfm_ros.geometry.ransac import ransac_trials
 
 __all__ = [
+    "DEFAULT_METHOD",
     "METHODS",
     "Estimate",
     "EstimatorOptions",

@@ -54,6 +54,9 @@ _METHODS: dict[str, tuple[bool, str, str]] = {
     "lmeds7": (False, "seven", "lmeds"),
 }
 METHODS = tuple(_METHODS)
+#: The method of the node, ``process``, ``eval``'s comparisons and the library when none is named:
+#: the one that measures best (docs/benchmarks.md, ablation and hard-set sections).
+DEFAULT_METHOD = "sep4"
 TRIPLES = ("raw", "synthesized", "all")
 #: Most 3-point samples of stage 1 per line pair and control-point orientation (two orientations).
 STAGE1_MAX_SAMPLES = 200
@@ -101,9 +104,9 @@ class EstimatorOptions:
     triple: str = "raw"
     plane_check: bool = True
     lo: str = "sampson"
-    prosac: bool = False
-    sprt: bool = False
-    bailout: bool = False
+    prosac: bool = True
+    sprt: bool = True
+    bailout: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -323,7 +326,7 @@ def estimate_fundamental(
     pts2: Any,
     image_size1: Any,
     image_size2: Any = None,
-    method: str = "sep5",
+    method: str = DEFAULT_METHOD,
     threshold: float = 1.0,
     confidence: float = 0.99,
     seed: int | None = None,

@@ -37,7 +37,13 @@ from typing import Any
 import cv2
 import numpy as np
 
-from sepfm_ros.geometry import METHODS, Estimate, estimate_fundamental, symmetric_epipolar_distance
+from sepfm_ros.geometry import (
+    DEFAULT_METHOD,
+    METHODS,
+    Estimate,
+    estimate_fundamental,
+    symmetric_epipolar_distance,
+)
 from sepfm_ros.geometry.camera import CameraModel, undistort_points
 from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
 
@@ -67,7 +73,7 @@ class PipelineConfig:
     features: str = "orb"
     max_features: int = 1000
     ratio: float = 0.8
-    method: str = "sep5"
+    method: str = DEFAULT_METHOD
     threshold_px: float = 1.0
     confidence: float = 0.99
     seed: int = 0

@@ -17,7 +17,7 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 
-from sepfm_ros.geometry import METHODS
+from sepfm_ros.geometry import DEFAULT_METHOD, METHODS
 from sepfm_ros.geometry.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
@@ -86,7 +86,7 @@ PARAMS: dict[str, ParamSpec] = {
     "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
     "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
     "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
-    "method": ParamSpec("sep5", "estimator method", choices=METHODS),
+    "method": ParamSpec(DEFAULT_METHOD, "estimator method", choices=METHODS),
     "threshold_px": ParamSpec(
         1.0, "inlier threshold, symmetric epipolar distance, px", 0.01, 100.0
     ),

@@ -36,9 +36,9 @@ The ``-lmeds`` methods and ``lmeds7`` / ``lmeds8`` are least median of squares (
 
 ``threshold`` is not used to score or select an LMedS model nor to mark its inliers; it only
 serves the degeneracy checks (no motion, the plane-and-parallax check, inliers along one line)
-and the breakdown check: when the median residual of the final model exceeds ``threshold``,
-more than half of the matches are off it by more than the threshold, beyond what LMedS
-tolerates, and the status says so instead of "ok".
+and the breakdown check: with more than half of the matches outliers the median residual is an
+outlier's and the robust scale grows to tens of px; when the final robust scale exceeds
+``threshold`` the status says so (``"unreliable: ..."``) instead of "ok".
 """
 
 from __future__ import annotations
@@ -597,17 +597,18 @@ def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
                 plane = "degenerate: dominant plane (the least-median F has no support off it)"
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
-    est.inliers, est.scale, med = lmeds_final_inliers(d.distances(F), problem.model_points)
+    est.inliers, est.scale, _ = lmeds_final_inliers(d.distances(F), problem.model_points)
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
     elif plane is not None:
         est.status = plane
-    elif np.sqrt(med) > threshold:
+    elif est.scale > threshold:
         est.status = (
-            f"unreliable: median residual {np.sqrt(med):.2f} px exceeds the threshold "
-            f"{threshold:g} px (more than half of the matches are outliers: LMedS breaks down)"
+            f"unreliable: robust scale {est.scale:.2f} px exceeds the threshold {threshold:g} px "
+            "(more than half of the matches are outliers, beyond LMedS's breakdown point, or "
+            "the noise exceeds the threshold)"
         )
     else:
         p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]

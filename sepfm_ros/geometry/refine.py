@@ -165,8 +165,8 @@ def lmeds_refit(
 
     Each step takes the robust inliers of the current model (within 2.5 sigma of it, sigma its
     reweighted LMedS scale, :func:`sepfm_ros.geometry.fundamental_problem.lmeds_final_inliers`
-    with p = ``model_points``) and refits them (:func:`refit`); the refit becomes current only if its
-    median squared symmetric epipolar distance is lower, otherwise the refits stop.
+    with p = ``model_points``) and refits them (:func:`refit`); the refit becomes current only
+    if its median squared symmetric epipolar distance is lower, otherwise the refits stop.
 
     Returns:
         (K, 3, 3) every model fitted (K <= steps; 0 when the robust inliers are fewer than 8).

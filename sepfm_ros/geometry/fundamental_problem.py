@@ -115,19 +115,6 @@ def lmeds_final_inliers(d: np.ndarray, p: int) -> tuple[np.ndarray, float, float
     return d < LMEDS_INLIER * sigma, sigma, med
 
 
-def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
-    """(K, N) distances in px -> (cost (K,), inlier count (K,)).
-
-    msac: sum of min(d^2, t^2) (truncated quadratic); lmeds: median of d^2.
-    """
-    count = np.count_nonzero(d < threshold, axis=1)
-    if scoring == "lmeds":
-        cost = np.median(d * d, axis=1)
-    else:
-        cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
-    return cost, count
-
-
 class FundamentalProblem:
     """One RANSAC arm estimating F.
 

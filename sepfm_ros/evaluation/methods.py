@@ -2,7 +2,8 @@
 
 - Ours, from :mod:`sepfm_ros.geometry` (its ``METHODS``): ``sep4``, ``sep5``, ``sep4-lmeds``,
   ``sep5-lmeds`` (the separable two-stage estimator) and the package's own baselines ``ransac7``,
-  ``ransac8``, ``lmeds7``.
+  ``ransac8``, ``lmeds7``, ``lmeds8`` (least median of squares, seven- / eight-point; the
+  ``-lmeds`` variants are least median of squares too).
 - OpenCV ``cv2.findFundamentalMat``: ``cv-ransac`` (FM_RANSAC), ``cv-lmeds`` (FM_LMEDS),
   ``cv-magsac`` (USAC_MAGSAC), ``cv-accurate`` (USAC_ACCURATE), OpenCV's defaults otherwise
   (maxIters 1000). OpenCV's samplers start from a fixed internal random state, so a seed is

@@ -33,6 +33,9 @@ class Estimate:
         status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
         method: the method name that produced this estimate.
         timings_ms: milliseconds per stage ("lines", "stage1", "stage2", "refine", "total").
+        scale: the LMedS methods' robust scale sigma (px of symmetric epipolar distance) of F,
+            1.4826 (1 + 5 / (N - p)) sqrt(median d^2); their inliers are d < 2.5 sigma. None
+            for the other methods.
     """
 
     F: np.ndarray | None
@@ -49,6 +52,7 @@ class Estimate:
     status: str = "ok"
     method: str = ""
     timings_ms: dict[str, float] = field(default_factory=dict)
+    scale: float | None = None
 
     @property
     def num_inliers(self) -> int:

@@ -5,17 +5,46 @@ Methods (all through the same sampler, scoring, local optimisation and final ref
 ============  ================================================================================
 ``sep4``      line pair -> H_e (3 points, stage 1) -> 3 fixed + 4 sampled, seven-point (stage 2)
 ``sep5``      as sep4 with 3 fixed + 5 sampled, eight-point
-``sep4-lmeds`` / ``sep5-lmeds``  the same with least-median scoring
+``sep4-lmeds`` / ``sep5-lmeds``  the same as least median of squares (LMedS)
 ``ransac7``   standard RANSAC, seven-point, MSAC scoring
 ``ransac8``   standard RANSAC, eight-point, MSAC scoring
 ``lmeds7``    least median of squares, seven-point
+``lmeds8``    least median of squares, eight-point (the paper's LMedS baseline)
 ============  ================================================================================
+
+The ``-lmeds`` methods and ``lmeds7`` / ``lmeds8`` are least median of squares (Rousseeuw & Leroy
+1987; Zhang 1998 for F), with no inlier threshold:
+
+- every hypothesis (minimal-sample model, local refit, final refit) is scored by the median of
+  its squared symmetric epipolar distances over all matches; the lowest median wins everywhere,
+  MSAC costs are never used;
+- robust scale sigma = 1.4826 (1 + 5 / (n - p)) sqrt(median d^2) (p = 7 or 8 points per model),
+  robust inliers d < 2.5 sigma; local optimisation refits the robust inliers
+  (:func:`~sepfm_ros.geometry.refine.lmeds_refit`);
+- number of samples: F(k, r) with r = 1 - (robust inliers of the best model so far) / N, but at
+  least F(k, 0.5) (capped at ``max_samples``). The floor is needed: a wrong model has broad
+  residuals, so its robust scale is large and nearly every match falls within 2.5 sigma; the
+  adaptive rule alone would stop after the first few samples on a wrong model. F(k, 0.5) is the
+  classic LMedS choice (an outlier-free sample with confidence p whenever fewer than half of
+  the matches are outliers, LMedS's breakdown point). The racing arms of the separable variants
+  compare robust inlier counts under the best model's robust scale;
+- final model: the best model and its normalised eight-point refits on its robust inliers
+  (Sampson IRLS with ``refine``), the lowest median kept; then the robust scale and the inlier
+  mask are computed once from it: Rousseeuw & Leroy's reweighted scale sigma* = sqrt(sum w d^2
+  / (sum w - p)) over the matches within 2.5 sigma (the median-based sigma is inflated by the
+  outliers when there are any), ``Estimate.scale`` = sigma*, inliers d < 2.5 sigma*.
+
+``threshold`` is not used to score or select an LMedS model nor to mark its inliers; it only
+serves the degeneracy checks (no motion, the plane-and-parallax check, inliers along one line)
+and the breakdown check: with more than half of the matches outliers the median residual is an
+outlier's and the robust scale grows to tens of px; when the final robust scale exceeds
+``threshold`` the status says so (``"unreliable: ..."``) instead of "ok".
 """
 
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, fields, replace
+from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 import numba
@@ -25,7 +54,12 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.degeneracy import plane_and_parallax
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
-from sepfm_ros.geometry.fundamental_problem import LO_SCHEMES, FundamentalProblem
+from sepfm_ros.geometry.fundamental_problem import (
+    LO_SCHEMES,
+    FundamentalProblem,
+    RobustScale,
+    lmeds_final_inliers,
+)
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
 from sepfm_ros.geometry.line_pairs import (
     LinePair,
@@ -39,9 +73,10 @@ from sepfm_ros.geometry.ransac import (
     RaceOptions,
     RansacResult,
     SamplingOptions,
+    ransac_trials,
     run_ransac,
 )
-from sepfm_ros.geometry.refine import iterative_refit
+from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
 
 # method -> (separable?, solver, scoring)
 _METHODS: dict[str, tuple[bool, str, str]] = {
@@ -52,6 +87,7 @@ _METHODS: dict[str, tuple[bool, str, str]] = {
     "ransac7": (False, "seven", "msac"),
     "ransac8": (False, "eight", "msac"),
     "lmeds7": (False, "seven", "lmeds"),
+    "lmeds8": (False, "eight", "lmeds"),
 }
 METHODS = tuple(_METHODS)
 #: The method of the node, ``process``, ``eval``'s comparisons and the library when none is named:
@@ -339,7 +375,10 @@ def estimate_fundamental(
         pts1, pts2: (N, 2) pixel coordinates in image 1 and 2, best matches first if known.
         image_size1, image_size2: (width, height) in px; image_size2 defaults to image_size1.
         method: one of :data:`METHODS`.
-        threshold: inlier threshold, px of symmetric epipolar distance.
+        threshold: inlier threshold, px of symmetric epipolar distance. The LMedS methods
+            (``*-lmeds``, ``lmeds7``, ``lmeds8``) do not use it to score, select or mark inliers
+            (they use their robust scale, ``Estimate.scale``); for them it only serves the
+            degeneracy checks and the breakdown check (see the module docstring).
         confidence: RANSAC confidence for adaptive termination F(k, r).
         seed: seed of the ``numpy.random.Generator`` behind every random choice.
         options: an :class:`EstimatorOptions` (default: its defaults).
@@ -399,17 +438,32 @@ class _Problem:
     opt: EstimatorOptions
     rng: np.random.Generator
     budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
+    scale: RobustScale = field(default_factory=RobustScale)  #: LMedS: shared by all arms
+
+    @property
+    def lmeds(self) -> bool:
+        return self.scoring == "lmeds"
+
+    @property
+    def model_points(self) -> int:
+        return 7 if self.solver == "seven" else 8
+
+    def min_samples(self, k: int) -> int:
+        """Samples drawn at least: LMedS F(k, 0.5) (see the module docstring), else 1."""
+        if not self.lmeds:
+            return 1
+        return min(ransac_trials(k, 0.5, self.confidence), self.opt.max_samples)
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
         left of the budget."""
         arm = FundamentalProblem(
-            self.data, self.solver, self.threshold, self.scoring, lo=self.opt.lo
+            self.data, self.solver, self.threshold, self.scoring, scale=self.scale, lo=self.opt.lo
         )
         return run_ransac(
-            [arm], self.rng, self.confidence, self.opt.max_samples, initial=initial,
-            budget=self.budget,
-            sampling=self.opt.sampling(),
+            [arm], self.rng, self.confidence, self.opt.max_samples,
+            min_samples=self.min_samples(arm.sample_size), initial=initial,
+            budget=self.budget, sampling=self.opt.sampling(),
         )  # fmt: skip
 
 
@@ -444,6 +498,7 @@ def _separable(
         stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
         budget=problem.budget,
         sampling=opt.sampling(),
+        min_samples=problem.min_samples(problem.model_points - 3),
     )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
     if fits and result.leader >= 0:
@@ -499,12 +554,23 @@ def _stage2_arm(
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
     fits.append(fit)
     return FundamentalProblem(
-        d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool, lo=opt.lo
+        d,
+        problem.solver,
+        problem.threshold,
+        problem.scoring,
+        f1,
+        f2,
+        pool,
+        scale=problem.scale,
+        lo=opt.lo,
     )
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     """Final model (refit, refinement, plane check), inliers and status into ``est``."""
+    if problem.lmeds:
+        _finish_lmeds(problem, est, F)
+        return
     d, threshold = problem.data, problem.threshold
     t4 = time.perf_counter()
     F, refits = _final_model(F, d, threshold, problem.opt.refine)
@@ -540,3 +606,60 @@ def _final_model(
     candidates = np.ascontiguousarray(np.stack([F, *fitted]))
     cost, _ = msac_kernel(candidates, data.X1, data.X2, threshold)
     return normalize_fundamental(candidates[int(np.argmin(cost))]), len(fitted)
+
+
+def _median_sq(F: np.ndarray, data: Correspondences) -> np.ndarray:
+    """Median squared symmetric epipolar distance (px^2) of (3, 3) or (K, 3, 3) models."""
+    d = data.distances(np.ascontiguousarray(F))
+    return np.median(d * d, axis=-1)
+
+
+def _final_model_lmeds(
+    F: np.ndarray, data: Correspondences, model_points: int, refine: bool
+) -> tuple[np.ndarray, int]:
+    """LMedS final model: F and its refits on its robust inliers (:func:`lmeds_refit`, Sampson
+    IRLS with ``refine``), the lowest median kept. Returns (F, number of refits scored)."""
+    fitted = lmeds_refit(F, data, model_points, irls_iterations=2 if refine else 0)
+    candidates = np.ascontiguousarray(np.stack([F, *fitted]))
+    return normalize_fundamental(candidates[int(np.argmin(_median_sq(candidates, data)))]), len(
+        fitted
+    )
+
+
+def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
+    """:func:`_finish` of the LMedS methods: the final model by median, the plane check as a
+    degeneracy test (``threshold``), inliers from the robust scale, the breakdown check."""
+    d, threshold = problem.data, problem.threshold
+    t4 = time.perf_counter()
+    F, refits = _final_model_lmeds(F, d, problem.model_points, problem.opt.refine)
+    est.stage2_hypotheses += refits
+    plane = None
+    if problem.opt.plane_check:
+        check = plane_and_parallax(F, d.pts1, d.pts2, threshold, problem.rng)
+        est.stage2_hypotheses += check.candidates
+        plane = check.reason
+        if check.replaced:
+            # the check found F without support off a dominant plane; its plane-and-parallax
+            # model is taken only if it does not raise the median
+            if _median_sq(check.F, d) <= _median_sq(F, d):
+                F = check.F
+            elif plane is None:
+                plane = "degenerate: dominant plane (the least-median F has no support off it)"
+    est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
+    est.F = F
+    est.inliers, est.scale, _ = lmeds_final_inliers(d.distances(F), problem.model_points)
+    est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
+    k = est.num_inliers
+    if k < 8:
+        est.status = f"degenerate: only {k} inliers"
+    elif plane is not None:
+        est.status = plane
+    elif est.scale > threshold:
+        est.status = (
+            f"unreliable: robust scale {est.scale:.2f} px exceeds the threshold {threshold:g} px "
+            "(more than half of the matches are outliers, beyond LMedS's breakdown point, or "
+            "the noise exceeds the threshold)"
+        )
+    else:
+        p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]
+        est.status = _line_band_status(p1, p2, threshold) or est.status

@@ -17,11 +17,19 @@ from sepfm_ros.geometry.epipolar import (
     msac_kernel,
     sprt_msac_kernel,
 )
-from sepfm_ros.geometry.refine import iterative_refit
+from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
 SCORINGS = ("msac", "lmeds")
+
+#: Robust scale of least median of squares (Rousseeuw & Leroy 1987; Zhang 1998 for F):
+#: sigma = LMEDS_SCALE * (1 + 5 / (n - p)) * sqrt(median d^2), inliers d < LMEDS_INLIER * sigma.
+LMEDS_SCALE = 1.4826
+LMEDS_INLIER = 2.5
+#: Least robust scale, px: on noise-free data the residuals are rounding errors (~1e-13 px) and
+#: a scale from them would call half of the exact matches outliers.
+LMEDS_MIN_SCALE = 1e-6
 
 
 @numba.njit(cache=True, nogil=True)
@@ -67,17 +75,55 @@ LO_SCHEMES: dict[str, tuple[tuple[float, ...], int]] = {
 }
 
 
-def score_distances(d: np.ndarray, threshold: float, scoring: str) -> tuple[np.ndarray, np.ndarray]:
-    """(K, N) distances in px -> (cost (K,), inlier count (K,)).
+def robust_scale(median_sq: np.ndarray | float, n: int, p: int) -> np.ndarray | float:
+    """LMedS robust scale (px) from the median of squared residuals over n matches, sample size p.
 
-    msac: sum of min(d^2, t^2) (truncated quadratic); lmeds: median of d^2.
+    sigma = 1.4826 * (1 + 5 / (n - p)) * sqrt(median d^2): 1.4826 makes it consistent for
+    Gaussian residuals, (1 + 5 / (n - p)) corrects the small-sample bias; at least
+    LMEDS_MIN_SCALE.
     """
-    count = np.count_nonzero(d < threshold, axis=1)
-    if scoring == "lmeds":
-        cost = np.median(d * d, axis=1)
-    else:
-        cost = np.minimum(d * d, threshold * threshold).sum(axis=1)
-    return cost, count
+    return np.maximum(
+        LMEDS_SCALE * (1.0 + 5.0 / max(n - p, 1)) * np.sqrt(median_sq), LMEDS_MIN_SCALE
+    )
+
+
+class RobustScale:
+    """The robust scale (px) of the best LMedS model so far, shared by every arm of one estimate,
+    so inlier counts of different models and arms are comparable (the race compares them).
+
+    ``sigma`` only shrinks: the best model has the lowest median and so the lowest scale.
+    """
+
+    def __init__(self) -> None:
+        self.sigma = np.inf
+
+    def update(self, sigma: float) -> None:
+        self.sigma = min(self.sigma, float(sigma))
+
+    @property
+    def threshold(self) -> float:
+        """Robust inlier threshold (px): LMEDS_INLIER * sigma."""
+        return LMEDS_INLIER * self.sigma
+
+
+def lmeds_inliers(d: np.ndarray, p: int) -> tuple[np.ndarray, float, float]:
+    """(N,) residuals (px) of one model -> (robust inlier mask, robust scale px, median d^2)."""
+    med = float(np.median(d * d))
+    sigma = float(robust_scale(med, d.shape[0], p))
+    return d < LMEDS_INLIER * sigma, sigma, med
+
+
+def lmeds_final_inliers(d: np.ndarray, p: int) -> tuple[np.ndarray, float, float]:
+    """Final LMedS inliers of one model from its (N,) residuals (px), Rousseeuw & Leroy's
+    reweighted scale: the preliminary scale s0 (:func:`robust_scale`) marks w_i = [d_i < 2.5
+    s0]; sigma = sqrt(sum w_i d_i^2 / (sum w_i - p)) (no longer inflated by the outliers above
+    the median); inliers d < 2.5 sigma. Returns (inlier mask, sigma px, median d^2)."""
+    first, _, med = lmeds_inliers(d, p)
+    k = int(np.count_nonzero(first))
+    if k <= p:
+        return first, float(robust_scale(med, d.shape[0], p)), med
+    sigma = max(float(np.sqrt(np.sum(d[first] ** 2) / (k - p))), LMEDS_MIN_SCALE)
+    return d < LMEDS_INLIER * sigma, sigma, med
 
 
 class FundamentalProblem:
@@ -93,6 +139,13 @@ class FundamentalProblem:
             that fixes the same 3 degrees of freedom with the noise averaged.
         pool: indices of ``data`` eligible for sampling (default: all).
         lo: local optimisation scheme, a key of :data:`LO_SCHEMES`.
+        scale: lmeds only: the :class:`RobustScale` shared by the arms of one estimate (a new one
+            by default).
+
+    Scoring "lmeds": cost = median of d^2 over all matches; the inlier count of a model is the
+    number of matches within the robust inlier threshold 2.5 sigma of the best model so far
+    (sigma of :func:`robust_scale`), so the count of the best model is its robust inlier set
+    and counts of other models and arms compare with it; ``threshold`` plays no part.
     """
 
     def __init__(
@@ -105,6 +158,7 @@ class FundamentalProblem:
         fixed2: np.ndarray | None = None,
         pool: np.ndarray | None = None,
         lo: str = "sampson",
+        scale: RobustScale | None = None,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(
@@ -126,6 +180,11 @@ class FundamentalProblem:
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)
+        #: p of the robust scale: the points that determine a model (fixed ones included)
+        self.model_points = 7 if solver == "seven" else 8
+        self.scale = scale if scale is not None else RobustScale()
+        if scoring == "lmeds":
+            self.recount = self._recount  # the race re-counts arms when the scale shrinks
 
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
@@ -141,7 +200,14 @@ class FundamentalProblem:
     def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self.scoring == "msac":  # compiled, no (K, N) distance matrix
             return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
-        return score_distances(self.distances(models), self.threshold, self.scoring)
+        d = self.distances(models)
+        cost = np.median(d * d, axis=1)
+        self.scale.update(robust_scale(cost.min(), self.n, self.model_points))
+        return cost, np.count_nonzero(d < self.scale.threshold, axis=1)
+
+    def _recount(self, model: np.ndarray) -> int:
+        """lmeds: matches of ``model`` (3, 3) within the current robust inlier threshold."""
+        return int(np.count_nonzero(self.data.distances(model) < self.scale.threshold))
 
     def score_early(
         self,
@@ -166,7 +232,10 @@ class FundamentalProblem:
         )  # fmt: skip
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
-        """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit)."""
+        """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit);
+        lmeds: on its robust inliers (see lmeds_refit), judged by the caller by their median."""
+        if self.scoring == "lmeds":
+            return lmeds_refit(model, self.data, self.model_points, irls_iterations=0)
         return iterative_refit(
             model, self.data, self.threshold, factors=self.lo_factors,
             irls_iterations=self.lo_irls,

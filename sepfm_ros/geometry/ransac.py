@@ -88,6 +88,11 @@ class Problem(Protocol):
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Models (J, ...) refined from ``model`` and its inliers (J may be 0)."""
 
+    # Optional: ``recount(model) -> int``, for problems whose inlier counts depend on the best
+    # model so far (LMedS: matches within its robust scale). With it an arm's support is the
+    # count of its lowest-cost model, re-counted whenever the best model improves, instead of
+    # the largest count any of its models had.
+
 
 @dataclass
 class RaceOptions:
@@ -344,6 +349,8 @@ class _Arm:
     raw_count: int = 0
     checked: bool = False  #: its best model was locally optimised before a drop
     sampler: ProsacSampler | None = None  #: PROSAC state (None: uniform sampling)
+    top_model: Any = None  #: lowest-cost model of any kind (only for problems with ``recount``)
+    top_cost: float = np.inf
 
 
 class _Run:
@@ -404,12 +411,20 @@ class _Run:
         self.hypotheses += len(models)
         i = int(np.argmin(cost))
         arm = self.arms[a]
-        arm.best_count = max(arm.best_count, int(count.max()))
+        recount = getattr(arm.problem, "recount", None)
+        if recount is None:
+            arm.best_count = max(arm.best_count, int(count.max()))
+        elif cost[i] < arm.top_cost:
+            arm.top_model, arm.top_cost, arm.best_count = models[i], float(cost[i]), int(count[i])
         if cost[i] < self.best_cost:
             self.best_model, self.best_cost = models[i], float(cost[i])
             self.best_count, self.leader = int(count[i]), a
             if self.sprt is not None:
                 self.sprt.update(self.best_count, arm.problem.n)
+            if recount is not None:  # counts are relative to the best model: re-count the others
+                for b, other in enumerate(self.arms):
+                    if b != a and other.top_model is not None:
+                        other.best_count = other.problem.recount(other.top_model)
         return i
 
     def local_optimization(self, a: int, model: Any) -> None:

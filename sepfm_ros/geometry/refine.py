@@ -152,3 +152,38 @@ def iterative_refit(
         data.T1, data.T2, float(threshold), np.asarray(factors, dtype=np.float64),
         int(irls_iterations),
     )  # fmt: skip
+
+
+def lmeds_refit(
+    F: np.ndarray,
+    data: Correspondences,
+    model_points: int,
+    steps: int = 2,
+    irls_iterations: int = 0,
+) -> np.ndarray:
+    """Least-median refits: refit F on its robust inliers, as long as the median improves.
+
+    Each step takes the robust inliers of the current model (within 2.5 sigma of it, sigma its
+    reweighted LMedS scale, :func:`sepfm_ros.geometry.fundamental_problem.lmeds_final_inliers`
+    with p = ``model_points``) and refits them (:func:`refit`); the refit becomes current only
+    if its median squared symmetric epipolar distance is lower, otherwise the refits stop.
+
+    Returns:
+        (K, 3, 3) every model fitted (K <= steps; 0 when the robust inliers are fewer than 8).
+    """
+    from sepfm_ros.geometry.fundamental_problem import lmeds_final_inliers
+
+    out = []
+    d = data.distances(np.ascontiguousarray(F, dtype=np.float64))
+    inl, _, med = lmeds_final_inliers(d, model_points)
+    for _ in range(steps):
+        if np.count_nonzero(inl) < 8:
+            break
+        G = refit(data, inl, irls_iterations)
+        out.append(G)
+        dG = data.distances(G)
+        inl_g, _, med_g = lmeds_final_inliers(dG, model_points)
+        if not med_g < med:
+            break
+        inl, med = inl_g, med_g
+    return np.stack(out) if out else np.zeros((0, 3, 3))

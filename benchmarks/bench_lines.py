@@ -167,7 +167,7 @@ def ratio_lines(rows: dict, methods: list[str], default: str) -> list[str]:
     out = []
     if default in fs:
         diffs = [
-            f"minus {b}'s: {fs[default] - fs[b]:+.3f}" if b in fs else f"{b}: not run"
+            f"minus {b}'s: {fs[default] - fs[b]:+.3f}" if b in fs else f"minus {b}'s: n/a (not run)"
             for b in ("cv-accurate", "poselib")
         ]
         out.append(f"- default method ({default}) F-score " + "; ".join(diffs))

@@ -11,6 +11,8 @@ Fixtures:
 
 - ``shared_data``: the folder ``../shared/data`` beside the repository (real images with GT F).
   Skips when it is missing, unless ``SEPFM_REQUIRE_SHARED=1`` (CI), where it fails instead.
+- ``shared_data_lines``: ``../shared/data_lines`` (line-rich Strecha pairs), the same way; tests
+  using it are marked ``shared_data`` too.
 - ``compiled_kernels`` (autouse): the estimator's numba kernels compiled (or loaded from the
   on-disk cache) once, before any test, so node subprocesses started by tests load a warm cache
   instead of each compiling for tens of seconds.
@@ -56,7 +58,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         names = getattr(item, "fixturenames", ())
         if "ros_domain_id" in names:
             item.add_marker(pytest.mark.ros)
-        if "shared_data" in names:
+        if "shared_data" in names or "shared_data_lines" in names:
             item.add_marker(pytest.mark.shared_data)
         module = getattr(getattr(item, "module", None), "__name__", "").rsplit(".", 1)[-1]
         for mark in MODULE_MARKS.get(module, ()):
@@ -72,6 +74,18 @@ def shared_data() -> Path:
             pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
         pytest.skip(message)
     return SHARED_DATA
+
+
+@pytest.fixture(scope="session")
+def shared_data_lines() -> Path:
+    """Path of ../shared/data_lines (line-rich Strecha pairs); skips or fails as shared_data."""
+    folder = SHARED_DATA.parent / "data_lines"
+    if not (folder / "pairs.json").is_file():
+        message = f"shared data not found at {folder}"
+        if os.environ.get("SEPFM_REQUIRE_SHARED") == "1":
+            pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
+        pytest.skip(message)
+    return folder
 
 
 @pytest.fixture(scope="session", autouse=True)

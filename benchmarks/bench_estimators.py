@@ -59,8 +59,9 @@ def run_setting(
                 med = met.median_error if r.F is not None else np.inf
                 ok = bool(np.isfinite(med) and med < 1.0 and not met.failed)
                 rows[name].append({
-                    "pair": pair.pair_id, "scene": pair.scene, "f": met.f_score, "med": med,
-                    "mean": met.mean_error, "pct": met.pct_inliers, "failed": met.failed,
+                    "pair": pair.pair_id, "scene": pair.scene, "baseline": pair.baseline,
+                    "f": met.f_score, "med": med, "mean": met.mean_error, "pct": met.pct_inliers,
+                    "failed": met.failed,
                     "evaluable": met.evaluable, "ok": ok, "hyp": r.hypotheses, "ms": r.ms,
                     "line": r.line_pair is not None, "out": outlier_rate, "n": len(pos),
                 })  # fmt: skip

@@ -148,16 +148,17 @@ def method_table(rows: dict, methods: list[str]) -> list[str]:
     return out
 
 
-def scene_table(rows: dict, methods: list[str]) -> list[str]:
-    scenes = list(dict.fromkeys(r["scene"] for r in rows[methods[0]]))
+def group_table(rows: dict, methods: list[str], key: str = "scene") -> list[str]:
+    """Mean F-score per value of ``key`` ("scene" or "baseline") and method."""
+    groups = list(dict.fromkeys(r[key] for r in rows[methods[0]]))
     out = [
-        "| scene | runs | " + " | ".join(methods) + " |",
+        f"| {key} | runs | " + " | ".join(methods) + " |",
         "|---" * (2 + len(methods)) + "|",
     ]
-    for sc in scenes:
-        cells = [np.mean([r["f"] for r in rows[m] if r["scene"] == sc]) for m in methods]
-        n = sum(r["scene"] == sc for r in rows[methods[0]])
-        out.append(f"| {sc} | {n} | " + " | ".join(f"{c:.3f}" for c in cells) + " |")
+    for g in groups:
+        cells = [np.mean([r["f"] for r in rows[m] if r[key] == g]) for m in methods]
+        n = sum(r[key] == g for r in rows[methods[0]])
+        out.append(f"| {g or '?'} | {n} | " + " | ".join(f"{c:.3f}" for c in cells) + " |")
     return out
 
 
@@ -197,7 +198,11 @@ def report(label: str, ratio: float, threshold: float, rows: dict, methods, defa
         "",
         "Mean F-score per scene:",
         "",
-        *scene_table(rows, methods),
+        *group_table(rows, methods, "scene"),
+        "",
+        "Mean F-score per baseline (parallax: small < 15 deg <= medium < 30 deg <= wide):",
+        "",
+        *group_table(rows, methods, "baseline"),
         "",
     ]
     return "\n".join(out)

@@ -36,6 +36,7 @@ def test_two_pairs_two_methods_print_and_write_docs(shared_data_lines, tmp_path,
     rows = re.findall(rf"^\| ({name}|cv-magsac) \| (\d\.\d{{3}}) ± \d\.\d{{3}} \|", out, re.M)
     assert len(rows) == 6 and all(0.0 <= float(f) <= 1.0 for _, f in rows)
     assert out.count("Mean F-score per scene:") == 3
+    assert out.count("Mean F-score per baseline") == 3
     assert f"median ms / cv-magsac's (same run): {default}" in out
     assert f"default method ({default}) F-score minus cv-accurate's: n/a (not run)" in out
     # positives are the matches within 1 px of the GT F at any threshold: the 3 px run at SIFT

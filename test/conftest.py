@@ -65,27 +65,26 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(getattr(pytest.mark, mark))
 
 
-@pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """Path of ../shared/data; skip (or fail with SEPFM_REQUIRE_SHARED=1) when missing."""
-    if not (SHARED_DATA / "pairs.json").is_file():
-        message = f"shared data not found at {SHARED_DATA}"
-        if os.environ.get("SEPFM_REQUIRE_SHARED") == "1":
-            pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
-        pytest.skip(message)
-    return SHARED_DATA
-
-
-@pytest.fixture(scope="session")
-def shared_data_lines() -> Path:
-    """Path of ../shared/data_lines (line-rich Strecha pairs); skips or fails as shared_data."""
-    folder = SHARED_DATA.parent / "data_lines"
+def _shared_folder(folder: Path) -> Path:
+    """``folder`` when it holds pairs.json; else skip (or fail with SEPFM_REQUIRE_SHARED=1)."""
     if not (folder / "pairs.json").is_file():
         message = f"shared data not found at {folder}"
         if os.environ.get("SEPFM_REQUIRE_SHARED") == "1":
             pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
         pytest.skip(message)
     return folder
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Path of ../shared/data; skip (or fail with SEPFM_REQUIRE_SHARED=1) when missing."""
+    return _shared_folder(SHARED_DATA)
+
+
+@pytest.fixture(scope="session")
+def shared_data_lines() -> Path:
+    """Path of ../shared/data_lines (line-rich Strecha pairs); skips or fails as shared_data."""
+    return _shared_folder(SHARED_DATA.parent / "data_lines")
 
 
 @pytest.fixture(scope="session", autouse=True)

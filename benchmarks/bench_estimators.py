@@ -36,27 +36,39 @@ METHODS = ["sep5", "sep4", "ransac7", "ransac8", "cv-ransac", "cv-lmeds", "cv-ma
            "cv-accurate"] + (["poselib"] if poselib_available() else [])  # fmt: skip
 
 
-def run_setting(pairs, ratio: float, seeds: list[int], threshold: float = 1.0) -> dict:
+def run_setting(
+    pairs, ratio: float, seeds: list[int], threshold: float = 1.0, methods: list[str] | None = None
+) -> dict:
+    """Every method x seed on every pair's SIFT matches at ``ratio``: {method: [row per run]}.
+
+    Positives are the matches within 1 px of the GT F whatever ``threshold`` is (metrics.py);
+    ``threshold`` is the estimators' inlier threshold and the one the inlier mask is cut at.
+    """
+    methods = METHODS if methods is None else methods
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", ratio))
-    rows = {m: [] for m in METHODS}
+    rows = {m: [] for m in methods}
     t0 = time.time()
     for i, pair in enumerate(pairs):
         m = cache.matches(pair)
         pos = positives(pair.F_gt, m.pts_a, m.pts_b)
         outlier_rate = 1.0 - pos.mean()
-        for name in METHODS:
+        for name in methods:
             for seed in seeds:
                 r = REGISTRY[name].run(m.pts_a, m.pts_b, m.size_a, m.size_b, threshold, 0.99, seed)
                 met = run_metrics(r.F, m.pts_a, m.pts_b, pos, threshold)
                 med = met.median_error if r.F is not None else np.inf
                 ok = bool(np.isfinite(med) and med < 1.0 and not met.failed)
                 rows[name].append({
-                    "pair": pair.pair_id, "f": met.f_score, "med": med, "ok": ok,
-                    "hyp": r.hypotheses, "ms": r.ms, "line": r.line_pair is not None,
-                    "out": outlier_rate, "n": len(pos),
+                    "pair": pair.pair_id, "scene": pair.scene, "baseline": pair.baseline,
+                    "f": met.f_score, "med": med, "mean": met.mean_error, "pct": met.pct_inliers,
+                    "failed": met.failed,
+                    "evaluable": met.evaluable, "ok": ok, "hyp": r.hypotheses, "ms": r.ms,
+                    "line": r.line_pair is not None, "out": outlier_rate, "n": len(pos),
                 })  # fmt: skip
         el = time.time() - t0
-        sys.stderr.write(f"\r  ratio {ratio}: {i + 1}/{len(pairs)} pairs, {el:.0f} s")
+        sys.stderr.write(
+            f"\r  ratio {ratio}, threshold {threshold} px: {i + 1}/{len(pairs)} pairs, {el:.0f} s"
+        )
     sys.stderr.write("\n")
     return rows
 

@@ -11,6 +11,8 @@ Fixtures:
 
 - ``shared_data``: the folder ``../shared/data`` beside the repository (real images with GT F).
   Skips when it is missing, unless ``SEPFM_REQUIRE_SHARED=1`` (CI), where it fails instead.
+- ``shared_data_lines``: ``../shared/data_lines`` (line-rich Strecha pairs), the same way; tests
+  using it are marked ``shared_data`` too.
 - ``compiled_kernels`` (autouse): the estimator's numba kernels compiled (or loaded from the
   on-disk cache) once, before any test, so node subprocesses started by tests load a warm cache
   instead of each compiling for tens of seconds.
@@ -56,22 +58,33 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         names = getattr(item, "fixturenames", ())
         if "ros_domain_id" in names:
             item.add_marker(pytest.mark.ros)
-        if "shared_data" in names:
+        if "shared_data" in names or "shared_data_lines" in names:
             item.add_marker(pytest.mark.shared_data)
         module = getattr(getattr(item, "module", None), "__name__", "").rsplit(".", 1)[-1]
         for mark in MODULE_MARKS.get(module, ()):
             item.add_marker(getattr(pytest.mark, mark))
 
 
-@pytest.fixture(scope="session")
-def shared_data() -> Path:
-    """Path of ../shared/data; skip (or fail with SEPFM_REQUIRE_SHARED=1) when missing."""
-    if not (SHARED_DATA / "pairs.json").is_file():
-        message = f"shared data not found at {SHARED_DATA}"
+def _shared_folder(folder: Path) -> Path:
+    """``folder`` when it holds pairs.json; else skip (or fail with SEPFM_REQUIRE_SHARED=1)."""
+    if not (folder / "pairs.json").is_file():
+        message = f"shared data not found at {folder}"
         if os.environ.get("SEPFM_REQUIRE_SHARED") == "1":
             pytest.fail(message + " (SEPFM_REQUIRE_SHARED=1)")
         pytest.skip(message)
-    return SHARED_DATA
+    return folder
+
+
+@pytest.fixture(scope="session")
+def shared_data() -> Path:
+    """Path of ../shared/data; skip (or fail with SEPFM_REQUIRE_SHARED=1) when missing."""
+    return _shared_folder(SHARED_DATA)
+
+
+@pytest.fixture(scope="session")
+def shared_data_lines() -> Path:
+    """Path of ../shared/data_lines (line-rich Strecha pairs); skips or fails as shared_data."""
+    return _shared_folder(SHARED_DATA.parent / "data_lines")
 
 
 @pytest.fixture(scope="session", autouse=True)

@@ -71,6 +71,11 @@ class EstimatorOptions:
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
         plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
+        sample_plane_check: separable stage 2 rejects, before solving, a sample two of whose
+            points lie on one plane with the fixed line points (3 line + 2 points on one
+            homography: the sample is plane-degenerate); it still counts as drawn.
+        sample_plane_factor: that check's tolerance on the homography's transfer error, times
+            the threshold.
     """
 
     max_samples: int = 10000
@@ -84,6 +89,8 @@ class EstimatorOptions:
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
+    sample_plane_check: bool = True
+    sample_plane_factor: float = 2.0
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -101,7 +108,7 @@ class EstimatorOptions:
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
-        for name in ("line_distance", "line_threshold"):
+        for name in ("line_distance", "line_threshold", "sample_plane_factor"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
         if self.triple not in TRIPLES:
@@ -453,7 +460,10 @@ def _stage2_arm(
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
     fits.append(fit)
-    return FundamentalProblem(d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool)
+    tol = opt.sample_plane_factor * problem.threshold if opt.sample_plane_check else 0.0
+    return FundamentalProblem(
+        d, problem.solver, problem.threshold, problem.scoring, f1, f2, pool, plane_tol=tol
+    )
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:

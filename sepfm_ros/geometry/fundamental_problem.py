@@ -20,85 +20,108 @@ SCORINGS = ("msac", "lmeds")
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _basis(p: np.ndarray, q: np.ndarray, r: np.ndarray, s: np.ndarray, M: np.ndarray) -> None:
-    """M (3, 3) with M e_1 ~ p, M e_2 ~ q, M e_3 ~ r and M (1, 1, 1) ~ s (homogeneous (3,))."""
-    # lambda = adj([p q r]) s: the columns' weights up to the determinant's scale
-    l0 = (q[1] * r[2] - q[2] * r[1]) * s[0] + (q[2] * r[0] - q[0] * r[2]) * s[1]
-    l0 += (q[0] * r[1] - q[1] * r[0]) * s[2]
-    l1 = (r[1] * p[2] - r[2] * p[1]) * s[0] + (r[2] * p[0] - r[0] * p[2]) * s[1]
-    l1 += (r[0] * p[1] - r[1] * p[0]) * s[2]
-    l2 = (p[1] * q[2] - p[2] * q[1]) * s[0] + (p[2] * q[0] - p[0] * q[2]) * s[1]
-    l2 += (p[0] * q[1] - p[1] * q[0]) * s[2]
-    for i in range(3):
-        M[i, 0], M[i, 1], M[i, 2] = l0 * p[i], l1 * q[i], l2 * r[i]
+def _det3(S: np.ndarray, r0: int, r1: int, r2: int, c0: int, c1: int, c2: int) -> float:
+    return (
+        S[r0, c0] * (S[r1, c1] * S[r2, c2] - S[r1, c2] * S[r2, c1])
+        - S[r0, c1] * (S[r1, c0] * S[r2, c2] - S[r1, c2] * S[r2, c0])
+        + S[r0, c2] * (S[r1, c0] * S[r2, c1] - S[r1, c1] * S[r2, c0])
+    )
 
 
 @numba.njit(cache=True, nogil=True)
-def line_plane_error(c1, c2, u1, u2, v1, v2) -> float:
-    """How far two matches (u1 -> u2, v1 -> v2) are from sharing a plane with a 3D line.
+def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray) -> None:
+    """G (4, 4) = A^T A of the two DLT rows A (2, 4) of match x -> u in the basis N (9, 4)."""
+    r = np.zeros((2, 4))
+    row0 = (x[0], x[1], 1.0, 0.0, 0.0, 0.0, -u[0] * x[0], -u[0] * x[1], -u[0])
+    row1 = (0.0, 0.0, 0.0, x[0], x[1], 1.0, -u[1] * x[0], -u[1] * x[1], -u[1])
+    for m in range(4):
+        for i in range(9):
+            r[0, m] += row0[i] * N[i, m]
+            r[1, m] += row1[i] * N[i, m]
+    for m in range(4):
+        for q in range(4):
+            G[m, q] = r[0, m] * r[0, q] + r[1, m] * r[1, q]
 
-    c1, c2: (3, 2) three correspondences on the line (ends first and last); u*, v*: (2,) points.
-    The homography through the line's two end points and the two matches (4 points, exact) maps
-    the middle line point of image 1 to its match when, and only when (for correct matches in
-    general position), the 5 points are images of one 3D plane: 3 collinear correspondences fix
-    5 of a plane homography's 8 degrees of freedom and 2 more points fix 4, so 1 is left over.
-    Returns the distance (units of image 2's coordinates) between the transferred and the
-    matched middle point, inf when the 4 points are degenerate.
+
+@numba.njit(cache=True, nogil=True)
+def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj) -> float:
+    """Larger transfer error (image 2's units) of two matches under the least-squares
+    homography H = N h through them (``line_plane_basis``); h is the smallest eigenvector of
+    the 4x4 S = Gi + Gj, taken as the adjugate's largest column (S is near singular exactly
+    when the pair shares a plane with the line)."""
+    S = Gi + Gj
+    idx = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    best, col = -1.0, 0
+    for m in range(4):  # diagonal cofactors: the largest picks the column
+        c = _det3(S, idx[m, 0], idx[m, 1], idx[m, 2], idx[m, 0], idx[m, 1], idx[m, 2])
+        if c > best:
+            best, col = c, m
+    if not best > 0:
+        return 0.0  # rank <= 2: the pair does not fix H (coincident points); degenerate
+    h = np.empty(4)
+    for r in range(4):  # adj(S)[r, col] = (-1)^(r + col) minor(col, r)
+        sign = 1.0 if (r + col) % 2 == 0 else -1.0
+        rr, cc = idx[col], idx[r]
+        h[r] = sign * _det3(S, rr[0], rr[1], rr[2], cc[0], cc[1], cc[2])
+    H = np.zeros(9)
+    for i in range(9):
+        for m in range(4):
+            H[i] += N[i, m] * h[m]
+    err = 0.0
+    for x, u in ((xi, ui), (xj, uj)):
+        w = H[6] * x[0] + H[7] * x[1] + H[8]
+        if w == 0.0:
+            return np.inf
+        du = (H[0] * x[0] + H[1] * x[1] + H[2]) / w - u[0]
+        dv = (H[3] * x[0] + H[4] * x[1] + H[5]) / w - u[1]
+        e = np.sqrt(du * du + dv * dv)
+        if not np.isfinite(e):
+            return np.inf
+        err = max(err, e)
+    return err
+
+
+@numba.njit(cache=True, nogil=True)
+def line_plane_degenerate(N, x1, x2, sample, tol) -> bool:
+    """True when some two points of ``sample`` share a plane with the line whose homographies
+    span ``N`` (9, 4) (see :func:`line_plane_basis`): both points' transfer errors under the
+    pair's least-squares homography below ``tol`` (image 2's normalised units).
+
+    3 collinear correspondences fix 5 of a plane homography's 8 degrees of freedom and 2 more
+    points fix 4, so one is left over to test.
     """
-    P1 = np.empty((4, 3))
-    P2 = np.empty((4, 3))
-    for c in range(2):
-        P1[0, c], P1[1, c], P1[2, c], P1[3, c] = c1[0, c], c1[2, c], u1[c], v1[c]
-        P2[0, c], P2[1, c], P2[2, c], P2[3, c] = c2[0, c], c2[2, c], u2[c], v2[c]
-    for i in range(4):
-        P1[i, 2] = 1.0
-        P2[i, 2] = 1.0
-    M1 = np.empty((3, 3))
-    M2 = np.empty((3, 3))
-    _basis(P1[0], P1[1], P1[2], P1[3], M1)
-    _basis(P2[0], P2[1], P2[2], P2[3], M2)
-    # H = M2 adj(M1); transfer the middle point: h = M2 (adj(M1) b)
-    b = np.array([c1[1, 0], c1[1, 1], 1.0])
-    a = np.empty(3)
-    for i in range(3):
-        j, k = (i + 1) % 3, (i + 2) % 3
-        # row i of adj(M1) is the cross product of columns j and k of M1
-        a[i] = (
-            (M1[1, j] * M1[2, k] - M1[2, j] * M1[1, k]) * b[0]
-            + (M1[2, j] * M1[0, k] - M1[0, j] * M1[2, k]) * b[1]
-            + (M1[0, j] * M1[1, k] - M1[1, j] * M1[0, k]) * b[2]
-        )
-    h0 = M2[0, 0] * a[0] + M2[0, 1] * a[1] + M2[0, 2] * a[2]
-    h1 = M2[1, 0] * a[0] + M2[1, 1] * a[1] + M2[1, 2] * a[2]
-    h2 = M2[2, 0] * a[0] + M2[2, 1] * a[1] + M2[2, 2] * a[2]
-    scale = abs(h0) + abs(h1) + abs(h2)
-    if not scale > 0 or abs(h2) <= 1e-12 * scale:
-        return np.inf
-    e = np.hypot(h0 / h2 - c2[1, 0], h1 / h2 - c2[1, 1])
-    return e if np.isfinite(e) else np.inf
-
-
-@numba.njit(cache=True, nogil=True)
-def line_plane_degenerate(c1, c2, x1, x2, sample, tol) -> bool:
-    """True when some two points of ``sample`` lie on one plane with the line (see
-    :func:`line_plane_error`; transfer error below ``tol``)."""
     k = sample.shape[0]
+    G = np.empty((k, 4, 4))
+    for i in range(k):
+        _point_gram(N, x1[sample[i]], x2[sample[i]], G[i])
     for i in range(k):
         for j in range(i + 1, k):
             p, q = sample[i], sample[j]
-            if line_plane_error(c1, c2, x1[p], x2[p], x1[q], x2[q]) < tol:
+            if _pair_plane_error(N, G[i], G[j], x1[p], x2[p], x1[q], x2[q]) < tol:
                 return True
     return False
 
 
+def line_plane_basis(f1: np.ndarray, f2: np.ndarray) -> np.ndarray:
+    """(9, 4): an orthonormal basis (row-major H) of the homographies that map the (f >= 3, 2)
+    collinear correspondences f1 -> f2 (least squares: the 4 smallest right singular vectors of
+    their DLT rows), for the in-sample plane check."""
+    rows = []
+    for (x, y), (u, v) in zip(f1, f2, strict=True):
+        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
+        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
+    _, _, Vt = np.linalg.svd(np.asarray(rows), full_matrices=True)
+    return np.ascontiguousarray(Vt[-4:].T)
+
+
 @numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, c1, c2, plane_tol):
+def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
     normalised coordinates; samples: (B, k) indices; T1, T2: (3, 3) normalising transforms.
-    seven: seven-point (each real root a model) or eight-point. c1, c2: (3, 2) normalised line
-    points (ends first and last) of the in-sample plane check, or (0, 2) for none; a sample in
+    seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the fixed
+    line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none; a sample in
     which two points share a plane with the line (``line_plane_degenerate`` at ``plane_tol``,
     image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at unit Frobenius
     norm, (K,) sample index of each model).
@@ -107,7 +130,7 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, c1, c2, plane_t
     keep = np.empty(B, dtype=np.int64)
     n_keep = 0
     for b in range(B):
-        if c1.shape[0] == 3 and line_plane_degenerate(c1, c2, x1, x2, samples[b], plane_tol):
+        if N.shape[1] == 4 and line_plane_degenerate(N, x1, x2, samples[b], plane_tol):
             continue
         keep[n_keep] = b
         n_keep += 1
@@ -134,16 +157,6 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, c1, c2, plane_t
             out_sid[n_out] = keep[sid[m]]
             n_out += 1
     return F[:n_out], out_sid[:n_out]
-
-
-def line_check_points(f1: np.ndarray, f2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(3, 2), (3, 2): the two extreme and the median of (f, 2) collinear correspondences along
-    their principal direction in image 1 (ends first and last), for the in-sample plane check."""
-    d = f1 - f1.mean(axis=0)
-    _, _, Vt = np.linalg.svd(d, full_matrices=False)
-    order = np.argsort(d @ Vt[0])
-    pick = order[[0, len(order) // 2, -1]]
-    return np.ascontiguousarray(f1[pick]), np.ascontiguousarray(f2[pick])
 
 
 #: Inlier-threshold factors of the local optimisation inside RANSAC (plain least squares; the
@@ -179,7 +192,7 @@ class FundamentalProblem:
         plane_tol: in-sample plane check (0: off): with at least 3 fixed line correspondences,
             a sample two of whose points share a plane with the line (the middle line point's
             transfer error under their homography below ``plane_tol`` px, see
-            :func:`line_plane_error`) is rejected before it is solved; it still counts as drawn.
+            :func:`line_plane_degenerate`) is rejected before it is solved; it still counts as drawn.
     """
 
     def __init__(
@@ -208,17 +221,17 @@ class FundamentalProblem:
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)
-        self.c1 = self.c2 = np.zeros((0, 2))
+        self.plane_basis = np.zeros((9, 0))
         self.plane_tol = 0.0
         if plane_tol > 0 and len(self.f1) >= 3:
-            self.c1, self.c2 = line_check_points(self.f1, self.f2)
+            self.plane_basis = line_plane_basis(self.f1, self.f2)
             self.plane_tol = float(plane_tol) * float(data.T2[0, 0])  # px -> image 2 normalised
 
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
         return solve_samples_kernel(
             self.f1, self.f2, self.data.x1, self.data.x2, samples, self.data.T1, self.data.T2,
-            self.solver == "seven", self.c1, self.c2, self.plane_tol,
+            self.solver == "seven", self.plane_basis, self.plane_tol,
         )  # fmt: skip
 
     def distances(self, F: np.ndarray) -> np.ndarray:

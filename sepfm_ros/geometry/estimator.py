@@ -71,6 +71,8 @@ class EstimatorOptions:
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
         plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
+        plane_check_adaptive: the plane check tries off-plane pairs until F(2, w) were tried
+            (w: the best candidate's off-plane inlier share) instead of all 300.
         sample_plane_check: separable stage 2 rejects, before solving, a sample two of whose
             points lie on one plane with the fixed line points (3 line + 2 points on one
             homography: the sample is plane-degenerate); it still counts as drawn.
@@ -89,7 +91,8 @@ class EstimatorOptions:
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
-    sample_plane_check: bool = True
+    plane_check_adaptive: bool = True
+    sample_plane_check: bool = False
     sample_plane_factor: float = 2.0
 
     def __post_init__(self) -> None:
@@ -474,7 +477,9 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
     plane = None
     if problem.opt.plane_check:
-        check = plane_and_parallax(F, d.pts1, d.pts2, threshold, problem.rng)
+        check = plane_and_parallax(
+            F, d.pts1, d.pts2, threshold, problem.rng, adaptive=problem.opt.plane_check_adaptive
+        )
         F, plane = check.F, check.reason
         est.stage2_hypotheses += check.candidates
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses

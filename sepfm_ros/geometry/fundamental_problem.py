@@ -120,10 +120,10 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
     normalised coordinates; samples: (B, k) indices; T1, T2: (3, 3) normalising transforms.
-    seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the fixed
-    line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none; a sample in
-    which two points share a plane with the line (``line_plane_degenerate`` at ``plane_tol``,
-    image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at unit Frobenius
+    seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the
+    fixed line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none;
+    a sample in which two points share a plane with the line (``line_plane_degenerate`` at
+    ``plane_tol``, image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at unit Frobenius
     norm, (K,) sample index of each model).
     """
     B, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
@@ -190,9 +190,10 @@ class FundamentalProblem:
             that fixes the same 3 degrees of freedom with the noise averaged.
         pool: indices of ``data`` eligible for sampling (default: all).
         plane_tol: in-sample plane check (0: off): with at least 3 fixed line correspondences,
-            a sample two of whose points share a plane with the line (the middle line point's
-            transfer error under their homography below ``plane_tol`` px, see
-            :func:`line_plane_degenerate`) is rejected before it is solved; it still counts as drawn.
+            a sample two of whose points share a plane with the line (both points' transfer
+            errors under their least-squares homography with the line below ``plane_tol`` px,
+            see :func:`line_plane_degenerate`) is rejected before it is solved; it still counts
+            as drawn.
     """
 
     def __init__(

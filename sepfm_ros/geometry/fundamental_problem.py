@@ -123,8 +123,8 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
     seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the
     fixed line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none;
     a sample in which two points share a plane with the line (``line_plane_degenerate`` at
-    ``plane_tol``, image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at unit Frobenius
-    norm, (K,) sample index of each model).
+    ``plane_tol``, image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at
+    unit Frobenius norm, (K,) sample index of each model).
     """
     B, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
     keep = np.empty(B, dtype=np.int64)

@@ -188,7 +188,7 @@ def plane_and_parallax(
     else:
         pairs = np.stack([rng.choice(off, 2, replace=False) for _ in range(max_candidates)])
     data = Correspondences.from_pixels(pts1, pts2)
-    X1o, X2o = np.ascontiguousarray(data.X1[off]), np.ascontiguousarray(data.X2[off])
+    X1o, X2o = np.ascontiguousarray(data.X1[:, off]), np.ascontiguousarray(data.X2[:, off])
     best, best_cost, tried, start = None, np.inf, 0, 0
     while start < len(pairs):
         # adaptive: stop once F(2, w) pairs were tried, w the best candidate's off-plane inlier

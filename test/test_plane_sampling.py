@@ -72,12 +72,16 @@ def test_two_points_on_the_lines_plane_make_the_sample_degenerate(noise):
 
 
 @pytest.mark.parametrize("noise", [0.0, 0.3])
-def test_a_generic_sample_is_kept(noise):
+def test_a_point_off_the_lines_plane_keeps_the_sample(noise):
     line, plane, off = _line_plane_scene(noise=noise)
     pts = (np.r_[plane[0], off[0]], np.r_[plane[1], off[1]])
-    # at most one point on the line's plane: every pair has parallax, nothing to reject
-    kept = sum(not _check(line, pts, [i, 20 + i, 21 + i, 22 + i, 23 + (i % 4)]) for i in range(16))
-    assert kept >= 15  # a rare pair of off-plane points may happen to fit a plane with the line
+    # one point on the line's plane, one at least 1 m off it: the pair has clear parallax
+    kept = sum(not _check(line, pts, [i, 20 + i]) for i in range(20))
+    # (one of the 20 plane points lies near the line: the pair then fits the plane through the
+    # line and the other point as well, which is near-degenerate indeed)
+    assert kept >= 18
+    # (two off-plane points can lie near some other plane through the line: such samples are
+    # rejected too, and should be; on the plane-majority scenes 5-15% of such pairs were)
 
 
 def test_the_line_basis_holds_the_planes_homography():
@@ -94,13 +98,18 @@ def test_the_line_basis_holds_the_planes_homography():
 def test_rejected_samples_yield_no_model_and_keep_their_index():
     line, plane, off = _line_plane_scene(noise=0.2)
     data = Correspondences.from_pixels(np.r_[plane[0], off[0]], np.r_[plane[1], off[1]])
-    samples = np.array([[0, 1, 20, 21], [20, 22, 24, 26], [2, 3, 30, 31], [21, 23, 25, 27]])
+    rng = np.random.default_rng(1)
+    samples = np.array([[0, 1, 20, 21], *(rng.choice(40, 4, replace=False) for _ in range(30))])
     sids = {}
     for tol in (0.0, 2.0):
         arm = FundamentalProblem(data, "seven", 1.0, "msac", line[0], line[1], plane_tol=tol)
         _, sids[tol] = arm.solve(samples)
-    assert set(sids[0.0]) == {0, 1, 2, 3}
-    assert set(sids[2.0]) == {1, 3}
+    N = line_plane_basis(arm.f1, arm.f2)
+    flagged = {b for b, smp in enumerate(samples)
+               if line_plane_degenerate(N, data.x1, data.x2, smp, 2.0 * data.T2[0, 0])}  # fmt: skip
+    assert 0 in flagged and len(flagged) < len(samples)
+    assert set(sids[0.0]) == set(range(len(samples)))
+    assert set(sids[2.0]) == set(range(len(samples))) - flagged
 
 
 def plane_scene_counts(methods=METHODS, scenes=SCENES, **options):

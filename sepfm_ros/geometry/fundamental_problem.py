@@ -28,10 +28,15 @@ def _det3(S: np.ndarray, r0: int, r1: int, r2: int, c0: int, c1: int, c2: int) -
     )
 
 
+#: rows / columns kept in the 3x3 minors of a 4x4 matrix, by the one left out
+_MINOR = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+
+
 @numba.njit(cache=True, nogil=True)
-def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray) -> None:
-    """G (4, 4) = A^T A of the two DLT rows A (2, 4) of match x -> u in the basis N (9, 4)."""
-    r = np.zeros((2, 4))
+def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray, r: np.ndarray) -> None:
+    """G (4, 4) = A^T A of the two DLT rows A (2, 4) of match x -> u in the basis N (9, 4);
+    r: (2, 4) work space."""
+    r[:] = 0.0
     row0 = (x[0], x[1], 1.0, 0.0, 0.0, 0.0, -u[0] * x[0], -u[0] * x[1], -u[0])
     row1 = (0.0, 0.0, 0.0, x[0], x[1], 1.0, -u[1] * x[0], -u[1] * x[1], -u[1])
     for m in range(4):
@@ -44,13 +49,15 @@ def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray) -> N
 
 
 @numba.njit(cache=True, nogil=True)
-def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj) -> float:
+def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj, S, h, H) -> float:
     """Larger transfer error (image 2's units) of two matches under the least-squares
     homography H = N h through them (``line_plane_basis``); h is the smallest eigenvector of
     the 4x4 S = Gi + Gj, taken as the adjugate's largest column (S is near singular exactly
-    when the pair shares a plane with the line)."""
-    S = Gi + Gj
-    idx = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
+    when the pair shares a plane with the line). S (4, 4), h (4,), H (9,): work space."""
+    for m in range(4):
+        for q in range(4):
+            S[m, q] = Gi[m, q] + Gj[m, q]
+    idx = _MINOR
     best, col = -1.0, 0
     for m in range(4):  # diagonal cofactors: the largest picks the column
         c = _det3(S, idx[m, 0], idx[m, 1], idx[m, 2], idx[m, 0], idx[m, 1], idx[m, 2])
@@ -58,12 +65,11 @@ def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj) -> float:
             best, col = c, m
     if not best > 0:
         return 0.0  # rank <= 2: the pair does not fix H (coincident points); degenerate
-    h = np.empty(4)
     for r in range(4):  # adj(S)[r, col] = (-1)^(r + col) minor(col, r)
         sign = 1.0 if (r + col) % 2 == 0 else -1.0
         rr, cc = idx[col], idx[r]
         h[r] = sign * _det3(S, rr[0], rr[1], rr[2], cc[0], cc[1], cc[2])
-    H = np.zeros(9)
+    H[:] = 0.0
     for i in range(9):
         for m in range(4):
             H[i] += N[i, m] * h[m]
@@ -92,12 +98,16 @@ def line_plane_degenerate(N, x1, x2, sample, tol) -> bool:
     """
     k = sample.shape[0]
     G = np.empty((k, 4, 4))
+    r = np.empty((2, 4))
+    S = np.empty((4, 4))
+    h = np.empty(4)
+    H = np.empty(9)
     for i in range(k):
-        _point_gram(N, x1[sample[i]], x2[sample[i]], G[i])
+        _point_gram(N, x1[sample[i]], x2[sample[i]], G[i], r)
     for i in range(k):
         for j in range(i + 1, k):
             p, q = sample[i], sample[j]
-            if _pair_plane_error(N, G[i], G[j], x1[p], x2[p], x1[q], x2[q]) < tol:
+            if _pair_plane_error(N, G[i], G[j], x1[p], x2[p], x1[q], x2[q], S, h, H) < tol:
                 return True
     return False
 

@@ -38,7 +38,7 @@ import numpy as np
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import homogeneous, msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
-from sepfm_ros.geometry.ransac import ransac_trials
+from sepfm_ros.geometry.ransac import ransac_trials, trials_needed
 from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
 
 
@@ -121,6 +121,9 @@ def plane_and_parallax(
     min_excess: int = 8,
     shuffles: int = 8,
     parallax_factor: float = 2.0,
+    adaptive: bool = True,
+    confidence: float = 0.99,
+    batch: int = 16,
 ) -> PlaneCheck:
     """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
 
@@ -135,6 +138,9 @@ def plane_and_parallax(
         shuffles: random re-pairings averaged for the chance count.
         parallax_factor: a match counts as off the plane (evidence for F) when its transfer
             error exceeds this times the homography tolerance (2 x ``threshold``).
+        adaptive: try off-plane pairs in batches of ``batch`` and stop once F(2, w) were tried
+            at ``confidence``, w the best candidate's share of inliers among the off-plane
+            matches (otherwise all ``max_candidates``).
     Returns:
         A :class:`PlaneCheck`.
     """
@@ -177,16 +183,33 @@ def plane_and_parallax(
     if n_pairs <= max_candidates:
         i, j = np.triu_indices(len(off), 1)
         pairs = np.stack([off[i], off[j]], axis=1)
+        if adaptive:
+            pairs = pairs[rng.permutation(len(pairs))]
     else:
         pairs = np.stack([rng.choice(off, 2, replace=False) for _ in range(max_candidates)])
-    models = parallax_models(H, pts1, pts2, pairs)
-    models = models[np.isfinite(models).all(axis=(1, 2))]
-    out.candidates = len(models)
-    if not len(models):
-        return out
     data = Correspondences.from_pixels(pts1, pts2)
-    costs, _ = msac_kernel(np.ascontiguousarray(models), data.X1, data.X2, threshold)
-    best = models[int(np.argmin(costs))]
+    X1o, X2o = np.ascontiguousarray(data.X1[:, off]), np.ascontiguousarray(data.X2[:, off])
+    best, best_cost, tried, start = None, np.inf, 0, 0
+    while start < len(pairs):
+        # adaptive: stop once F(2, w) pairs were tried, w the best candidate's off-plane inlier
+        # share (a candidate is right when both its off-plane matches are inliers)
+        stop = len(pairs) if not adaptive else start + batch
+        models = parallax_models(H, pts1, pts2, pairs[start:stop])
+        start = min(stop, len(pairs))
+        models = models[np.isfinite(models).all(axis=(1, 2))]
+        tried += len(models)
+        if len(models):
+            costs, _ = msac_kernel(np.ascontiguousarray(models), data.X1, data.X2, threshold)
+            k = int(np.argmin(costs))
+            if costs[k] < best_cost:
+                best, best_cost = models[k], float(costs[k])
+        if adaptive and best is not None:
+            _, off_count = msac_kernel(np.ascontiguousarray(best[None]), X1o, X2o, threshold)
+            if start >= trials_needed(2, int(off_count[0]), len(off), confidence, len(pairs)):
+                break
+    out.candidates = tried
+    if best is None:
+        return out
     # polish the best candidate like the estimator polishes its final model
     options = [best, *iterative_refit(best, data, threshold)]
     best_inl = _sed(best, pts1, pts2) < threshold

@@ -28,6 +28,7 @@ HEADLINE = "headline"
 SECTIONS = {
     "bench_estimators": "python benchmarks/bench_estimators.py --write-docs",
     "bench_lines": "python benchmarks/bench_lines.py --write-docs",
+    "bench_ablation": "python benchmarks/bench_ablation.py --write-docs",
     "bench_outliers": "python benchmarks/bench_outliers.py --write-docs",
     "bench_node": "python benchmarks/bench_node.py --write-docs",
     "bench_robustness": "python benchmarks/bench_robustness.py --write-docs",

@@ -1,0 +1,171 @@
+"""Benchmark: ablation of the default estimator, each component on and off, in one run.
+
+The default method (``sepfm_ros.geometry.DEFAULT_METHOD`` with default ``EstimatorOptions``) is
+run beside variants that each switch one component off (or on, for components that are off by
+default), the same method with every component of the shared RANSAC framework off at once, the
+other separable method and seven-point RANSAC (the separable part off), and the anchors
+(USAC_MAGSAC, USAC_ACCURATE and PoseLib when installed) on the same SIFT matches.
+
+Sets (threshold 1 px, confidence 0.99):
+
+- ``lines``: ../shared/data_lines/pairs.json at SIFT ratio 0.95 (line-rich facades, the hard set);
+- ``shared``: ../shared/data/pairs.json at SIFT ratio 0.95.
+
+Printed per set and configuration: mean F-score against the GT positives, success % (median
+GT-positive error < 1 px and >= 20 positives recovered), median hypotheses, median ms per pair and
+median ms over USAC_MAGSAC's (same run).
+
+    python benchmarks/bench_ablation.py [--sets lines,shared] [--step 4] [--seed 0]
+        [--write-docs [--readme README.md]]
+
+``--write-docs`` rewrites this script's section of docs/benchmarks.md and the table between the
+``<!-- ablation:begin -->`` / ``<!-- ablation:end -->`` markers of README.md.
+Figures are measured on this machine in this run; nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import bench_docs
+import numpy as np
+
+from sepfm_ros.evaluation.manifest import load_manifest
+from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
+from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
+from sepfm_ros.evaluation.metrics import positives, run_metrics
+from sepfm_ros.geometry import DEFAULT_METHOD, estimate_fundamental
+from sepfm_ros.geometry.compiled import warm_up as warm_up_geometry
+
+REPO = Path(__file__).resolve().parent.parent
+SHARED = REPO.parent / "shared"
+#: set name -> (manifest, SIFT ratio)
+SETS = {
+    "lines": (SHARED / "data_lines" / "pairs.json", 0.95),
+    "shared": (SHARED / "data" / "pairs.json", 0.95),
+}
+#: the framework components this ablation switches, with their values that turn them off
+FRAMEWORK_OFF = {
+    "prosac": False,
+    "sprt": False,
+    "bailout": False,
+    "lo": "plain",
+    "plane_check_adaptive": False,
+}
+#: label -> (method, options); method None = the default method
+CONFIGS: dict[str, tuple[str | None, dict]] = {
+    "default": (None, {}),
+    "PROSAC off": (None, {"prosac": False}),
+    "SPRT off": (None, {"sprt": False}),
+    "bail-out off": (None, {"bailout": False}),
+    "plain least-squares LO (Sampson LO off)": (None, {"lo": "plain"}),
+    "plane check on all 300 candidates (adaptive off)": (None, {"plane_check_adaptive": False}),
+    "final plane check off": (None, {"plane_check": False}),
+    "in-sample plane check on": (None, {"sample_plane_check": True}),
+    "final Sampson refinement off": (None, {"refine": False}),
+    "all framework components above off": (None, FRAMEWORK_OFF),
+    "sep5 (default options)": ("sep5", {}),
+    "ransac7: separable part off (default options)": ("ransac7", {}),
+    "ransac7, framework components off": ("ransac7", FRAMEWORK_OFF),
+}
+ANCHORS = ["cv-magsac", "cv-accurate"] + (["poselib"] if poselib_available() else [])
+
+
+def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, dict]:
+    """Every configuration and anchor on every ``step``-th pair: (pairs, {label: rows})."""
+    pairs, _ = load_manifest(manifest)
+    pairs = pairs[::step]
+    cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", ratio))
+    labels = [*CONFIGS, *ANCHORS]
+    rows: dict[str, list[tuple[bool, float, float, float]]] = {k: [] for k in labels}
+    t0 = time.time()
+    for i, pair in enumerate(pairs):
+        m = cache.matches(pair)
+        pos = positives(pair.F_gt, m.pts_a, m.pts_b)
+        for label in labels:
+            if label in CONFIGS:
+                method, options = CONFIGS[label]
+                t = time.perf_counter()
+                e = estimate_fundamental(
+                    m.pts_a, m.pts_b, m.size_a, m.size_b, method=method or DEFAULT_METHOD,
+                    threshold=1.0, confidence=0.99, seed=seed, **options,
+                )  # fmt: skip
+                ms = 1e3 * (time.perf_counter() - t)
+                F, hyp = e.F, float(e.hypotheses)
+            else:
+                r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
+                F, ms = r.F, r.ms
+                hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan
+            met = run_metrics(F, m.pts_a, m.pts_b, pos, 1.0)
+            ok = F is not None and met.median_error < 1.0 and not met.failed
+            rows[label].append((ok, met.f_score, hyp, ms))
+        sys.stderr.write(f"\r  {manifest.parent.name}: {i + 1}/{len(pairs)} pairs, "
+                         f"{time.time() - t0:.0f} s")  # fmt: skip
+    sys.stderr.write("\n")
+    return len(pairs), rows
+
+
+def table(rows: dict) -> str:
+    """Markdown table of one set's rows."""
+    magsac_ms = float(np.median([r[3] for r in rows["cv-magsac"]]))
+    out = [
+        "| configuration | F-score | success % | hypotheses (median) | ms (median) | "
+        "ms / USAC_MAGSAC |",
+        "|---|---|---|---|---|---|",
+    ]
+    for label, rs in rows.items():
+        r = np.array(rs, dtype=float)
+        hyp = np.nanmedian(r[:, 2]) if np.isfinite(r[:, 2]).any() else np.nan
+        name = f"{DEFAULT_METHOD} (default)" if label == "default" else label
+        out.append(
+            f"| {name} | {r[:, 1].mean():.3f} | {100 * r[:, 0].mean():.1f} | "
+            f"{'n/a' if np.isnan(hyp) else f'{hyp:.0f}'} | {np.median(r[:, 3]):.1f} | "
+            f"{np.median(r[:, 3]) / magsac_ms:.2f} |"
+        )
+    return "\n".join(out)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sets", default="lines,shared")
+    ap.add_argument("--step", type=int, default=4, help="every STEP-th pair of each manifest")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--write-docs", action="store_true")
+    ap.add_argument("--readme", type=Path, default=bench_docs.README)
+    ap.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC)
+    a = ap.parse_args(argv)
+    names = [s for s in a.sets.split(",") if s]
+    unknown = [s for s in names if s not in SETS]
+    if unknown:
+        ap.error(f"unknown sets {unknown}; known: {sorted(SETS)}")
+    for s in names:
+        if not SETS[s][0].is_file():
+            print(f"shared data not found: {SETS[s][0]}", file=sys.stderr)
+            return 2
+    warm_up_geometry()
+    parts = []
+    for s in names:
+        manifest, ratio = SETS[s]
+        n, rows = run_set(manifest, ratio, a.step, a.seed)
+        head = (f"**{manifest.parent.name}, SIFT ratio {ratio}, threshold 1 px** "
+                f"({n} pairs: every {a.step}th of {manifest.name}; seed {a.seed})")  # fmt: skip
+        parts.append(f"{head}\n\n{table(rows)}")
+        print(parts[-1] + "\n", flush=True)
+    body = "\n\n".join(parts)
+    title = f"Ablation of the default method ({DEFAULT_METHOD}), same run, same matches"
+    if a.write_docs:
+        command = bench_docs.command_line("bench_ablation.py", argv)
+        path = bench_docs.write_section(
+            "bench_ablation", bench_docs.section("bench_ablation", title, command, body), a.doc
+        )
+        readme = a.readme.read_text()
+        a.readme.write_text(bench_docs.replace_block(readme, "ablation", body))
+        print(f"wrote {path} and {a.readme}", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -121,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         f"`python benchmarks/bench_calibration_check.py --change {a.change}`",
         "",
         f"{FRAMES} stereo pairs of kitti_seq2 in order, node pipeline (ORB 1000, ratio 0.8, "
-        "sep5, 1 px), monitor defaults "
+        f"{PipelineConfig().method}, 1 px), monitor defaults "
         f"(window {config.window}, min_pairs {config.min_pairs}, min_inliers "
         f"{config.min_inliers}, WARN at {config.warn_epipolar_px} px / "
         f"{config.warn_rotation_deg} deg, ERROR at {config.error_epipolar_px} px / "

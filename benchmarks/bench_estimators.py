@@ -29,10 +29,11 @@ from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
 from sepfm_ros.evaluation.metrics import positives, run_metrics
+from sepfm_ros.geometry import DEFAULT_METHOD
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
-METHODS = ["sep5", "sep4", "ransac7", "ransac8", "cv-ransac", "cv-lmeds", "cv-magsac",
+METHODS = ["sep4", "sep5", "ransac7", "ransac8", "cv-ransac", "cv-lmeds", "cv-magsac",
            "cv-accurate"] + (["poselib"] if poselib_available() else [])  # fmt: skip
 
 
@@ -104,6 +105,7 @@ def report(ratio: float, rows: dict) -> str:
     hard_ratio = [s4[i]["hyp"] / max(1, r7[i]["hyp"]) for i in hard]
     ms = {k: np.median([r["ms"] for r in rows[k]]) for k in METHODS}
     fs = {k: np.mean([r["f"] for r in rows[k]]) for k in METHODS}
+    d = DEFAULT_METHOD
     out += [
         "",
         f"- sep4 / ransac7 hypotheses, median over the {len(used)} runs that used a line pair: "
@@ -112,10 +114,11 @@ def report(ratio: float, rows: dict) -> str:
         f" ratio of means {np.sum([s4[i]['hyp'] for i in used]) / np.sum([r7[i]['hyp'] for i in used]):.2f});"  # noqa: E501
         f" on the {len(hard)} runs with outlier rate >= 0.5: "
         f"{np.median(hard_ratio) if hard else float('nan'):.2f}",
-        f"- sep5 F-score minus USAC_MAGSAC's: {fs['sep5'] - fs['cv-magsac']:+.3f}; minus "
-        f"FM_RANSAC's: {fs['sep5'] - fs['cv-ransac']:+.3f}",
-        f"- sep5 median ms / USAC_MAGSAC's: {ms['sep5'] / ms['cv-magsac']:.2f}; / FM_RANSAC's: "
-        f"{ms['sep5'] / ms['cv-ransac']:.2f}",
+        f"- {d} (default) F-score minus USAC_MAGSAC's: {fs[d] - fs['cv-magsac']:+.3f}; minus "
+        f"USAC_ACCURATE's: {fs[d] - fs['cv-accurate']:+.3f}; minus FM_RANSAC's: "
+        f"{fs[d] - fs['cv-ransac']:+.3f}",
+        f"- {d} median ms / USAC_MAGSAC's: {ms[d] / ms['cv-magsac']:.2f}; / FM_RANSAC's: "
+        f"{ms[d] / ms['cv-ransac']:.2f}",
         "",
     ]
     return "\n".join(out)
@@ -124,7 +127,7 @@ def report(ratio: float, rows: dict) -> str:
 def headline(settings: dict[float, dict]) -> str:
     """README's headline table: F-score and median ms per pair of our methods, OpenCV's and
     PoseLib's, one column pair per SIFT ratio setting."""
-    names = [m for m in ("sep5", "sep4", "ransac7", "cv-ransac", "cv-magsac", "cv-accurate",
+    names = [m for m in ("sep4", "sep5", "ransac7", "cv-ransac", "cv-magsac", "cv-accurate",
                          "poselib") if m in METHODS]  # fmt: skip
     head = "| method | " + " | ".join(
         f"F-score (SIFT {r}) | ms per pair (SIFT {r})" for r in settings

@@ -4,9 +4,10 @@ Pairs: kitti_seq2 left frames 1, 2 and 4 apart, and consecutive templeRing views
 (../shared/data/cameras.json holds every camera). Matches: the node's pipeline, default config
 (ORB 1000, ratio 0.8). Methods on the same matches, with the GT intrinsics:
 
-- ``ours``: F by our estimator (sep5, 1 px), then :func:`sepfm_ros.geometry.pose.relative_pose`
-  (E = K_b^T F K_a, cheirality, Sampson refinement of R, t on F's inliers, then twice
-  re-selecting the inliers among all matches under the pose and refitting);
+- ``ours``: F by our estimator (the pipeline's default method, 1 px), then
+  :func:`sepfm_ros.geometry.pose.relative_pose` (E = K_b^T F K_a, cheirality, Sampson
+  refinement of R, t on F's inliers, then twice re-selecting the inliers among all matches
+  under the pose and refitting);
 - ``ours, refined on F's inliers only``: without the re-selection;
 - ``ours, no refinement``: the bare decomposition of E;
 - ``ours + E refit``: our inliers, E re-estimated on them by OpenCV (LMedS), ``recoverPose``;

@@ -592,21 +592,46 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     F, refits = _final_model(F, d, threshold, problem.opt.refine)
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
     plane = None
-    if problem.opt.plane_check:
-        check = plane_and_parallax(
-            F, d.pts1, d.pts2, threshold, problem.rng, adaptive=problem.opt.plane_check_adaptive
-        )
+    check = _plane_check(problem, est, F)
+    if check is not None:
         F, plane = check.F, check.reason
-        est.stage2_hypotheses += check.candidates
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
     est.inliers = d.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
+    _final_status(est, d, threshold, plane)
+
+
+def _plane_check(problem: _Problem, est: Estimate, F: np.ndarray):
+    """The dominant-plane check of ``F`` (``degeneracy.plane_and_parallax``) when the options ask
+    for it, its candidates counted in ``est``; None when it is off."""
+    if not problem.opt.plane_check:
+        return None
+    d = problem.data
+    check = plane_and_parallax(
+        F, d.pts1, d.pts2, problem.threshold, problem.rng,
+        adaptive=problem.opt.plane_check_adaptive,
+    )  # fmt: skip
+    est.stage2_hypotheses += check.candidates
+    return check
+
+
+def _final_status(
+    est: Estimate,
+    d: Correspondences,
+    threshold: float,
+    plane: str | None,
+    unreliable: str | None = None,
+) -> None:
+    """``est.status`` from its final inliers: too few, the plane check's reason, ``unreliable``
+    (a method's own reason), or inliers in a band around one line; else left as it is."""
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
     elif plane is not None:
         est.status = plane
+    elif unreliable is not None:
+        est.status = unreliable
     else:
         p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]
         est.status = _line_band_status(p1, p2, threshold) or est.status
@@ -652,11 +677,8 @@ def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     F, refits = _final_model_lmeds(F, d, problem.model_points, problem.opt.refine)
     est.stage2_hypotheses += refits
     plane = None
-    if problem.opt.plane_check:
-        check = plane_and_parallax(
-            F, d.pts1, d.pts2, threshold, problem.rng, adaptive=problem.opt.plane_check_adaptive
-        )
-        est.stage2_hypotheses += check.candidates
+    check = _plane_check(problem, est, F)
+    if check is not None:
         plane = check.reason
         if check.replaced:
             # the check found F without support off a dominant plane; its plane-and-parallax
@@ -669,17 +691,11 @@ def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     est.F = F
     est.inliers, est.scale, _ = lmeds_final_inliers(d.distances(F), problem.model_points)
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
-    k = est.num_inliers
-    if k < 8:
-        est.status = f"degenerate: only {k} inliers"
-    elif plane is not None:
-        est.status = plane
-    elif est.scale > threshold:
-        est.status = (
+    unreliable = None
+    if est.scale > threshold:
+        unreliable = (
             f"unreliable: robust scale {est.scale:.2f} px exceeds the threshold {threshold:g} px "
             "(more than half of the matches are outliers, beyond LMedS's breakdown point, or "
             "the noise exceeds the threshold)"
         )
-    else:
-        p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]
-        est.status = _line_band_status(p1, p2, threshold) or est.status
+    _final_status(est, d, threshold, plane, unreliable)

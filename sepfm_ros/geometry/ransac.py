@@ -187,7 +187,13 @@ def prosac_schedule(P: int, k: int, growth: int) -> np.ndarray:
     """
     if P < k:
         raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
-    T = float(growth)
+    return _prosac_schedule_kernel(P, k, float(growth))
+
+
+@numba.njit(cache=True, nogil=True)
+def _prosac_schedule_kernel(P: int, k: int, growth: float) -> np.ndarray:
+    """:func:`prosac_schedule` for P >= k (compiled: it runs once per arm of every estimate)."""
+    T = growth
     for i in range(k):
         T *= (k - i) / (P - i)  # T_k
     out = np.empty(P - k + 1, dtype=np.int64)

@@ -1,5 +1,6 @@
-"""The compiled line-pair search and stage 1 against plain reference implementations: Hough
-lines from points vs cv2.HoughLines on the binary image, the joint accumulator and ranking vs a
+"""The compiled line-pair search and stage 1 against plain reference implementations: the
+point-set Hough kernel vs cv2.HoughLinesPointSet, Hough lines from points vs cv2.HoughLines on
+the binary image, the joint accumulator and ranking vs a
 dense I1^T I2, the scalar H_e kernels vs the batched numpy solvers, stage-1 RANSAC on exact data."""
 
 from __future__ import annotations
@@ -17,6 +18,7 @@ from sepfm_ros.geometry.line_pairs import (
     LineSearchOptions,
     control_points,
     hough_lines,
+    hough_point_set,
     incidence,
     rank_line_pairs,
     working_scale,
@@ -74,6 +76,38 @@ def test_hough_from_points_matches_hough_on_binary_image(seed):
     assert np.allclose(np.hypot(ours[:, 0], ours[:, 1]), 1.0)
     inc = incidence(pts, ours, size, opts)
     assert inc[:, 0].sum() >= 12
+
+
+@pytest.mark.parametrize("kind", ["uniform pixels", "pixels on lines", "sub-pixel points"])
+def test_point_set_hough_equals_opencv_line_for_line(kind):
+    # hough_point_set is cv2.HoughLinesPointSet's arithmetic computed sparsely: same lines,
+    # votes, rho, theta and order, on integer pixels (what hough_lines passes) and others
+    rng = np.random.default_rng({"uniform pixels": 0, "pixels on lines": 1}.get(kind, 2))
+    compared = lines = 0
+    for _ in range(60):
+        w, h = (int(v) for v in rng.integers(60, 800, 2))
+        m = int(rng.integers(5, 400))
+        if kind == "uniform pixels":
+            pts = np.c_[rng.integers(0, w, m), rng.integers(0, h, m)]
+        elif kind == "pixels on lines":
+            a, b = rng.uniform([0, 0], [w - 1, h - 1], (2, 5, 2))
+            t = rng.uniform(0, 1, (5, m // 5 + 1, 1))
+            pts = np.rint(a[:, None] + t * (b - a)[:, None]).reshape(-1, 2)
+        else:
+            pts = np.c_[rng.uniform(0, w, m), rng.uniform(0, h, m)]
+        pts = np.unique(pts.astype(np.float32), axis=0)
+        args = (
+            int(rng.integers(1, 120)), int(rng.integers(1, 8)), float(-w),
+            float(np.ceil(np.hypot(w, h))), 1.0, 0.0, np.pi, np.pi / 180.0,
+        )  # fmt: skip
+        ref = cv2.HoughLinesPointSet(pts.reshape(-1, 1, 2), *args)
+        ref = np.zeros((0, 3)) if ref is None else ref.reshape(-1, 3)
+        ours = hough_point_set(pts, *args)
+        assert ours.shape == ref.shape
+        assert np.array_equal(ours, ref)
+        compared += 1
+        lines += len(ref)
+    assert compared == 60 and lines > 200  # the comparison saw many lines
 
 
 def _rank_reference(I1, I2, min_votes, max_pairs):

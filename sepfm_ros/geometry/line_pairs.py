@@ -5,15 +5,19 @@ whose point in image 2 lies on line n.
 The paper's accumulator is N x K1 x K2; summed over the correspondences it is the product of the
 two point-line incidence matrices, A = I1^T I2 (K1 x K2), which a compiled kernel builds from each
 correspondence's (line, line) incidences and ranks (see :func:`rank_line_pairs`). The Hough
-transform votes the points directly (``cv2.HoughLinesPointSet`` on the pixels of the binary
-image), which gives the lines of ``cv2.HoughLines`` on that image without scanning it.
+transform votes the pixels of the binary image directly (a point-set Hough transform, which gives
+the lines of ``cv2.HoughLines`` on that image without scanning it): :func:`hough_point_set` is
+``cv2.HoughLinesPointSet``'s arithmetic (float32 votes, its local-maximum rule and its order,
+tested equal to it line for line) in a compiled kernel that keeps three rows of the accumulator
+and examines only the cells that were voted for. OpenCV's call clears and scans the whole
+accumulator (about 1,240 x 180 cells at the 512 px working width) for a few hundred points,
+which made it most of the line search's time.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-import cv2
 import numba
 import numpy as np
 
@@ -75,16 +79,15 @@ def hough_lines(
     xy = binary_image_pixels(np.ascontiguousarray(pts, dtype=np.float64), s, w, h)
     if len(xy) == 0:
         return np.zeros((0, 3))
-    # HoughLinesPointSet votes the points directly (no image scan) over the rho range the
-    # image can produce for theta in [0, pi): x cos + y sin in [-(w - 1), hypot(w, h)]
-    found = cv2.HoughLinesPointSet(
-        xy, int(opts.max_lines), int(opts.min_votes),
+    # vote the points over the rho range the image can produce for theta in [0, pi):
+    # x cos + y sin in [-(w - 1), hypot(w, h)]
+    found = hough_point_set(
+        xy.reshape(-1, 2), int(opts.max_lines), int(opts.min_votes),
         float(-w), float(np.ceil(np.hypot(w, h))), 1.0, 0.0, np.pi, np.pi / 180.0,
     )  # fmt: skip
-    if found is None:
+    if len(found) == 0:
         return np.zeros((0, 3))
-    found = found.reshape(-1, 3).astype(np.float64)  # (votes, rho, theta), strongest first
-    rho, theta = found[: opts.max_lines, 1], found[: opts.max_lines, 2]
+    rho, theta = found[:, 1], found[:, 2]  # (votes, rho, theta), strongest first
     return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
 
 
@@ -113,6 +116,118 @@ def binary_image_pixels(pts: np.ndarray, scale: float, w: int, h: int) -> np.nda
             out[m, 0, 1] = keys[i] // w
             m += 1
     return out[:m]
+
+
+@numba.njit(cache=True, nogil=True)
+def hough_point_set(
+    xy: np.ndarray,
+    lines_max: int,
+    threshold: int,
+    min_rho: float,
+    max_rho: float,
+    rho_step: float,
+    min_theta: float,
+    max_theta: float,
+    theta_step: float,
+) -> np.ndarray:
+    """Hough lines through a point set: ``cv2.HoughLinesPointSet``'s result, computed sparsely.
+
+    Same arithmetic as OpenCV's (float32 trigonometric table and votes, round half to even),
+    same local maxima (a cell with more than ``threshold`` votes, more than its lower rho and
+    angle neighbours and at least its upper ones) and the same order (votes descending, then
+    angle index, then rho index). The accumulator is kept as three rolling angle rows, and
+    only the cells whose votes passed the threshold are examined, so the cost grows with
+    points x angles instead of with the accumulator's size.
+
+    Args:
+        xy: (M, 2) float32 points (x, y), px.
+        lines_max: most lines returned. threshold: votes a line must exceed.
+        min_rho, max_rho, rho_step: rho range and bin, px. min_theta, max_theta, theta_step:
+            angle range and bin, rad.
+    Returns:
+        (L, 3) float64 (votes, rho px, theta rad), strongest first, L <= lines_max.
+    """
+    irho = np.float32(1.0) / np.float32(rho_step)
+    irho_min = np.float32(min_rho) * irho
+    numangle = int(np.floor((max_theta - min_theta) / theta_step)) + 1
+    if numangle > 1 and abs(np.pi - (numangle - 1) * theta_step) < theta_step / 2:
+        numangle -= 1
+    numrho = int(np.rint((max_rho - min_rho + 1.0) / rho_step))
+    stride = numrho + 2
+    tab_cos = np.empty(numangle, dtype=np.float32)
+    tab_sin = np.empty(numangle, dtype=np.float32)
+    ang = np.float32(min_theta)
+    for n in range(numangle):
+        tab_sin[n] = np.float32(np.sin(np.float64(ang)) * np.float64(irho))
+        tab_cos[n] = np.float32(np.cos(np.float64(ang)) * np.float64(irho))
+        ang = np.float32(ang + np.float32(theta_step))
+    M = xy.shape[0]
+    x = xy[:, 0].copy()
+    y = xy[:, 1].copy()
+    # float32 round half to even of |v| < 2^22: v + 1.5 * 2^23 has a unit last place
+    magic = np.float32(12582912.0)
+    rho_f = np.empty(M, dtype=np.float32)
+    rows = np.zeros((3, stride), dtype=np.int32)  # angle rows n - 1, n, n + 1 (mod 3)
+    cols = np.empty((3, M), dtype=np.int32)  # each point's accumulator column in that row
+    # per row, the cells whose votes passed the threshold (at most M // (threshold + 1))
+    per_row = M // (max(threshold, 0) + 1) + 1
+    hot = np.empty((3, per_row), dtype=np.int32)
+    n_hot = np.zeros(3, dtype=np.int64)
+    cand_votes = np.empty(numangle * per_row, dtype=np.int64)
+    cand_base = np.empty(numangle * per_row, dtype=np.int64)
+    n_cand = 0
+    for n in range(-1, numangle):
+        nxt = n + 1
+        if nxt < numangle:  # vote row n + 1
+            slot = nxt % 3
+            row, col, row_hot = rows[slot], cols[slot], hot[slot]
+            c_n, s_n = tab_cos[nxt], tab_sin[nxt]
+            for i in range(M):
+                rho_f[i] = (x[i] * c_n + y[i] * s_n - irho_min + magic) - magic
+            k = 0
+            for i in range(M):
+                r = np.int32(rho_f[i])
+                if 0 <= r <= numrho:
+                    col[i] = r + 1
+                    row[r + 1] += 1
+                    if row[r + 1] == threshold + 1 and r < numrho:  # numrho: OpenCV's margin
+                        row_hot[k] = r + 1
+                        k += 1
+                else:
+                    col[i] = -1
+            n_hot[slot] = k
+        if n < 0:
+            continue
+        slot = n % 3
+        cur, up, low = rows[slot], rows[(n + 1) % 3], rows[(n + 2) % 3]
+        for j in range(n_hot[slot]):
+            c = hot[slot, j]
+            v = cur[c]
+            lo_v = low[c] if n > 0 else 0
+            up_v = up[c] if n + 1 < numangle else 0
+            if v > cur[c - 1] and v >= cur[c + 1] and v > lo_v and v >= up_v:
+                cand_votes[n_cand] = v
+                cand_base[n_cand] = (n + 1) * stride + c
+                n_cand += 1
+        if n > 0:  # row n - 1 is done: clear the cells it voted for, for row n + 2
+            row, col = rows[(n + 2) % 3], cols[(n + 2) % 3]
+            for i in range(M):
+                c = col[i]
+                if c >= 0:
+                    row[c] = 0
+    votes, base = cand_votes[:n_cand], cand_base[:n_cand]
+    order = np.argsort(base)  # ties in votes: smaller index first, as OpenCV's sort
+    order = order[np.argsort(-votes[order], kind="mergesort")]
+    L = min(lines_max, n_cand)
+    out = np.empty((L, 3))
+    for k in range(L):
+        b = base[order[k]]
+        n = b // stride - 1
+        r = b - (n + 1) * stride - 1
+        out[k, 0] = votes[order[k]]
+        out[k, 1] = np.float32(np.float32(min_rho) + np.float32(r) * np.float32(rho_step))
+        out[k, 2] = np.float32(np.float32(min_theta) + np.float32(n) * np.float32(theta_step))
+    return out
 
 
 def incidence(

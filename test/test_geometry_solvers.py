@@ -17,12 +17,45 @@ from sepfm_ros.geometry import (
 from sepfm_ros.geometry.epipolar import apply_transform, denormalize, normalization_transform
 from sepfm_ros.geometry.solvers import eight_point, line_homography_3pt, seven_point
 from sepfm_ros.geometry.solvers.line_homography import line_homography_lsq, transfer
+from sepfm_ros.geometry.solvers.seven_point import real_cubic_roots
 from sepfm_ros.geometry.synthetic import make_pair
 
 
 def _sign_free_error(F: np.ndarray, G: np.ndarray) -> float:
     F, G = normalize_fundamental(F), normalize_fundamental(G)
     return float(min(np.abs(F - G).max(), np.abs(F + G).max()))
+
+
+def test_real_cubic_roots_agree_with_numpy_on_random_and_hard_cubics():
+    # the seven-point solver's closed-form cubic against numpy.roots (companion eigenvalues):
+    # coefficients over 8 decades, cubics with a double or triple root, and a tiny leading
+    # coefficient (a root near infinity, where the solver falls back to the companion matrix)
+    rng = np.random.default_rng(0)
+    cubics = [rng.normal(size=4) * np.exp(rng.normal(size=4) * 2.0) for _ in range(20000)]
+    cubics += [np.poly([1.0, 1.0, -2.0]), np.poly([0.5, 0.5, 0.5]), np.poly([3.0, -1e-3, 1e-3])]
+    cubics += [np.array([1e-9, 1.0, -3.0, 2.0])]
+    out = np.empty(3)
+    three = 0
+    for c in cubics:
+        n = real_cubic_roots(*c, out)
+        ref = np.roots(c)
+        real = np.sort(ref[np.abs(ref.imag) <= 1e-6 * (1.0 + np.abs(ref.real))].real)
+        ours = np.sort(out[:n])
+        three += n == 3
+        # every root we return is a root (residual relative to the coefficients' scale) ...
+        scale = np.abs(c).max() * np.maximum(1.0, np.abs(ours)) ** 3
+        assert np.all(np.abs(np.polyval(c, ours)) <= 1e-9 * scale), (c, ours)
+        # ... and each of numpy's simple real roots is one of ours (a multiple root is only
+        # known to about the cube root of the precision, numpy's as well as ours)
+        simple = [
+            r for r in real
+            if abs(np.polyval(np.polyder(c), r)) > 1e-3 * np.abs(c).max() * max(1.0, abs(r)) ** 2
+        ]  # fmt: skip
+        for r in simple:
+            assert n and np.min(np.abs(ours - r)) <= 1e-6 * (1.0 + abs(r)), (c, ours, real)
+        if len(simple) == len(real):
+            assert n == len(real), (c, ours, real)
+    assert three > 2000  # both branches (one and three real roots) were exercised
 
 
 @pytest.fixture(scope="module")

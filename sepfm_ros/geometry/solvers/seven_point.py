@@ -57,24 +57,86 @@ def _seven_point_one(A: np.ndarray, vander_inv: np.ndarray, out: np.ndarray) -> 
     c3 = coeffs[0]
     if abs(c3) < 1e-12 * scale:  # a root at infinity (F = D): keep the cubic finite
         c3 = (1e-12 if c3 >= 0 else -1e-12) * scale
+    roots = np.empty(3)
+    n_roots = real_cubic_roots(c3, coeffs[1], coeffs[2], coeffs[3], roots)
+    n = 0
+    for k in range(n_roots):
+        r = roots[k]
+        norm = 0.0
+        for i in range(9):
+            out[n, i] = f2[i] + r * d[i]
+            norm += out[n, i] * out[n, i]
+        norm = np.sqrt(norm)
+        if np.isfinite(norm) and norm > 0:
+            for i in range(9):
+                out[n, i] /= norm
+            n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def _companion_roots(c3: float, c2: float, c1: float, c0: float, out: np.ndarray) -> int:
+    """Real roots of c3 s^3 + c2 s^2 + c1 s + c0 (c3 != 0) as eigenvalues of the companion
+    matrix (imaginary part at most 1e-8 (1 + |re|)) into out (3,); returns how many."""
     comp = np.zeros((3, 3), dtype=np.complex128)
-    for j in range(3):
-        comp[0, j] = -coeffs[j + 1] / c3
+    comp[0, 0], comp[0, 1], comp[0, 2] = -c2 / c3, -c1 / c3, -c0 / c3
     comp[1, 0] = 1.0
     comp[2, 1] = 1.0
-    roots = np.linalg.eigvals(comp)
     n = 0
-    for r in roots:
+    for r in np.linalg.eigvals(comp):
         if abs(r.imag) <= 1e-8 * (1.0 + abs(r.real)):
-            norm = 0.0
-            for i in range(9):
-                out[n, i] = f2[i] + r.real * d[i]
-                norm += out[n, i] * out[n, i]
-            norm = np.sqrt(norm)
-            if np.isfinite(norm) and norm > 0:
-                for i in range(9):
-                    out[n, i] /= norm
-                n += 1
+            out[n] = r.real
+            n += 1
+    return n
+
+
+@numba.njit(cache=True, nogil=True)
+def real_cubic_roots(c3: float, c2: float, c1: float, c0: float, out: np.ndarray) -> int:
+    """Real roots of c3 s^3 + c2 s^2 + c1 s + c0 (c3 != 0) into out (3,); returns how many.
+
+    Closed form (Cardano for one real root, the trigonometric form for three) of the monic
+    cubic, each root polished by Newton steps on the cubic as long as they lower its residual.
+    A near-double root counts as two roots only when the discriminant says three real roots.
+    When c3 is tiny against the other coefficients (a root near infinity, where the closed
+    form loses the small roots to cancellation) the companion matrix's eigenvalues are used.
+    """
+    big = max(abs(c2), abs(c1), abs(c0))
+    if abs(c3) < 1e-6 * big:
+        return _companion_roots(c3, c2, c1, c0, out)
+    a, b, c = c2 / c3, c1 / c3, c0 / c3
+    a3 = a / 3.0
+    p = b - a * a3  # t^3 + p t + q = 0 with s = t - a / 3
+    q = 2.0 * a3 * a3 * a3 - a3 * b + c
+    hq, tp = 0.5 * q, p / 3.0
+    disc = hq * hq + tp * tp * tp
+    n = 0
+    if disc > 0.0:
+        u = np.cbrt(-hq - np.copysign(np.sqrt(disc), hq))  # no cancellation
+        out[0] = (u - tp / u if u != 0.0 else 0.0) - a3
+        n = 1
+    elif tp == 0.0:
+        out[0] = -a3
+        n = 1
+    else:
+        m = 2.0 * np.sqrt(-tp)
+        cos3 = min(1.0, max(-1.0, 3.0 * q / (p * m)))
+        phi = np.arccos(cos3) / 3.0
+        for k in range(3):
+            out[k] = m * np.cos(phi - 2.0 * np.pi * k / 3.0) - a3
+        n = 3
+    for k in range(n):  # Newton polish on the monic cubic
+        s = out[k]
+        f = ((s + a) * s + b) * s + c
+        for _ in range(2):
+            df = (3.0 * s + 2.0 * a) * s + b
+            if df == 0.0:
+                break
+            t = s - f / df
+            ft = ((t + a) * t + b) * t + c
+            if not abs(ft) < abs(f):
+                break
+            s, f = t, ft
+        out[k] = s
     return n
 
 

@@ -56,6 +56,51 @@ def _distance_one(f: np.ndarray, x: float, y: float, u: float, v: float) -> floa
     return d if np.isfinite(d) else np.inf
 
 
+#: Relative margin of :func:`_distance_within`'s cheap test (far above the rounding of d).
+_WITHIN_MARGIN = 1.0 + 1e-9
+
+
+@numba.njit(cache=True, nogil=True, fastmath=False)
+def _distance_within(f: np.ndarray, x: float, y: float, u: float, v: float, cap2: float) -> float:
+    """:func:`_distance_one`, or inf when the distance is certainly at least cap px.
+
+    d = |r| (1 / sqrt(n2) + 1 / sqrt(n1)) / 2 >= |r| / sqrt(max(n1, n2)) (r = x2^T F x1, n the
+    squared line normals), so r^2 >= cap2 max(n1, n2), cap2 = cap^2 (1 + 1e-9), puts d above
+    ``cap`` by far more than its rounding: such a point is decided without square roots or
+    divisions, and every comparison ``d < t`` with t <= cap comes out as with the exact d.
+    """
+    a2 = f[0, 0] * x + f[0, 1] * y + f[0, 2]
+    b2 = f[1, 0] * x + f[1, 1] * y + f[1, 2]
+    c2 = f[2, 0] * x + f[2, 1] * y + f[2, 2]
+    a1 = f[0, 0] * u + f[1, 0] * v + f[2, 0]
+    b1 = f[0, 1] * u + f[1, 1] * v + f[2, 1]
+    n2 = a2 * a2 + b2 * b2
+    n1 = a1 * a1 + b1 * b1
+    r = a2 * u + b2 * v + c2
+    if r * r >= cap2 * max(n1, n2):
+        return np.inf
+    if n2 <= 0.0 or n1 <= 0.0:
+        return np.inf
+    d = 0.5 * abs(r) * (1.0 / np.sqrt(n2) + 1.0 / np.sqrt(n1))
+    return d if np.isfinite(d) else np.inf
+
+
+@numba.njit(cache=True, nogil=True)
+def distances_within_kernel(
+    F: np.ndarray, X1: np.ndarray, X2: np.ndarray, cap: float
+) -> np.ndarray:
+    """:func:`distances_kernel` with inf for the distances certainly at least ``cap`` px (see
+    :func:`_distance_within`): the same answers to every ``d < t`` with t <= cap, cheaper."""
+    M, N = F.shape[0], X1.shape[1]
+    cap2 = cap * cap * _WITHIN_MARGIN
+    out = np.empty((M, N))
+    for m in range(M):
+        f = F[m]
+        for i in range(N):
+            out[m, i] = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
+    return out
+
+
 @numba.njit(cache=True, nogil=True)
 def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
     """(M, 3, 3) models, (>=2, N) pixel points -> (M, N) symmetric epipolar distances (px)."""
@@ -78,6 +123,7 @@ def msac_kernel(
     """
     M, N = F.shape[0], X1.shape[1]
     t2 = threshold * threshold
+    cap2 = t2 * _WITHIN_MARGIN
     cost = np.empty(M)
     count = np.zeros(M, dtype=np.int64)
     for m in range(M):
@@ -85,7 +131,7 @@ def msac_kernel(
         c = 0.0
         k = 0
         for i in range(N):
-            d = _distance_one(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i])
+            d = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
             if d < threshold:
                 c += d * d
                 k += 1
@@ -127,6 +173,7 @@ def sprt_msac_kernel(
     """
     M, N = F.shape[0], X1.shape[1]
     t2 = threshold * threshold
+    cap2 = t2 * _WITHIN_MARGIN
     cost = np.empty(M)
     count = np.zeros(M, dtype=np.int64)
     read = np.zeros(M, dtype=np.int64)
@@ -142,7 +189,7 @@ def sprt_msac_kernel(
         j = 0
         while j < N:
             i = order[j]
-            d = _distance_one(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i])
+            d = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
             j += 1
             if d < threshold:
                 e = d * d

@@ -13,7 +13,7 @@ import numpy as np
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
-    distances_kernel,
+    distances_within_kernel,
     rank2_unit_kernel,
 )
 from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
@@ -79,7 +79,9 @@ def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2) -> np.ndarray:
 def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_iterations):
     """See :func:`iterative_refit`; returns (K, 3, 3) fitted models, K <= len(factors)."""
     t2 = threshold * threshold
-    d = distances_kernel(F.reshape(1, 3, 3), X1, X2)[0]
+    # distances beyond every factor's threshold (and the cost's) only need to be known as such
+    cap = max(factors.max(), 1.0) * threshold
+    d = distances_within_kernel(F.reshape(1, 3, 3), X1, X2, cap)[0]
     best_cost = np.minimum(d * d, t2).sum()
     out = np.empty((factors.shape[0], 3, 3))
     n_out = 0
@@ -96,7 +98,7 @@ def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_
         previous = inl
         have_previous = True
         G = _refit_kernel(x1, x2, np.flatnonzero(inl), irls_iterations, T1, T2)
-        dG = distances_kernel(G.reshape(1, 3, 3), X1, X2)[0]
+        dG = distances_within_kernel(G.reshape(1, 3, 3), X1, X2, cap)[0]
         c = np.minimum(dG * dG, t2).sum()
         for a in range(3):
             for b in range(3):

@@ -206,6 +206,9 @@ class EstimatorOptions:
         )
 
 
+_DEFAULTS = EstimatorOptions()
+
+
 def _validate_points(pts1: Any, pts2: Any, min_points: int) -> tuple[np.ndarray, np.ndarray]:
     p1 = np.ascontiguousarray(pts1, dtype=np.float64)
     p2 = np.ascontiguousarray(pts2, dtype=np.float64)
@@ -404,7 +407,9 @@ def estimate_fundamental(
     t_start = time.perf_counter()
     if method not in _METHODS:
         raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
-    opt = EstimatorOptions.from_kwargs(options, **kwargs)
+    if options is not None and not isinstance(options, EstimatorOptions):
+        raise ValueError(f"options must be an EstimatorOptions, got {type(options).__name__}")
+    opt = EstimatorOptions.from_kwargs(options, **kwargs) if kwargs else options or _DEFAULTS
     if not (np.isfinite(threshold) and threshold > 0):
         raise ValueError(f"threshold must be positive, got {threshold}")
     if not 0.0 < confidence < 1.0:

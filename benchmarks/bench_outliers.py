@@ -26,7 +26,8 @@ import numpy as np
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.metrics import positives, run_metrics
-from sepfm_ros.geometry import estimate_fundamental
+from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
+from sepfm_ros.geometry.ransac import ransac_trials
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
@@ -87,7 +88,9 @@ def main(argv: list[str] | None = None) -> int:
                 ms = (time.perf_counter() - t) * 1e3
                 met = run_metrics(e.F, pa, pb, pos, 1.0)
                 ok = e.F is not None and met.median_error < 1.0 and not met.failed
-                rows[name].append((ok, met.f_score, e.hypotheses, ms, e.line_pair is not None))
+                rows[name].append(
+                    (ok, met.f_score, e.hypotheses, ms, e.line_pair is not None, e.samples)
+                )
             sys.stderr.write(
                 f"\r  rate {rate}: {i + 1}/{len(pairs)} pairs, {time.time() - t0:.0f} s"
             )
@@ -105,6 +108,19 @@ def main(argv: list[str] | None = None) -> int:
             f"- outlier rate {rate:.2f}: sep4 / ransac7 hypotheses, median per-pair ratio over "
             f"the {int(used.sum())} runs with a line pair: {ratio:.2f}"
         )
+        cap = EstimatorOptions.from_kwargs(**options).max_samples
+        capped = int(np.count_nonzero(r7[:, 5] >= cap))
+        if capped:
+            # ransac7 stopped at the cap, not at F(7, r): the ratio then measures the cap
+            floor = ransac_trials(4, rate, 0.99, max_trials=10**9) / cap
+            notes.append(
+                f"  - ransac7 stopped at the sample cap ({cap}) in {capped} of {len(r7)} runs "
+                f"instead of at F(7, {rate:.2f}) = {ransac_trials(7, rate, 0.99, 10**9)} "
+                f"samples; with it capped, the ratio cannot fall below F(4, {rate:.2f}) / "
+                f"{cap} = {floor:.2f} (stage 2 alone draws F(4, r) samples, solved into as "
+                f"many models per sample as ransac7's); sep4's median samples: "
+                f"{np.median(s4[:, 5]):.0f}"
+            )
     body = "\n".join(lines + [""] + notes)
     print(f"## {title}\n\n{body}")
     if a.write_docs:

@@ -124,6 +124,7 @@ def plane_and_parallax(
     adaptive: bool = True,
     confidence: float = 0.99,
     batch: int = 16,
+    plane_points: int = 150,
 ) -> PlaneCheck:
     """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
 
@@ -141,6 +142,9 @@ def plane_and_parallax(
         adaptive: try off-plane pairs in batches of ``batch`` and stop once F(2, w) were tried
             at ``confidence``, w the best candidate's share of inliers among the off-plane
             matches (otherwise all ``max_candidates``).
+        plane_points: the homography is searched among at most this many of F's inliers,
+            drawn at random (its share of all of them is then counted); the search's time
+            grows with the points while the share it has to find does not.
     Returns:
         A :class:`PlaneCheck`.
     """
@@ -157,7 +161,10 @@ def plane_and_parallax(
     # degenerate for H, are flagged by the estimator's line-band check instead)
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
     iters = ransac_trials(4, 1.0 - plane_share, 0.995, max_trials=500)
-    H, _ = cv2.findHomography(pts1[inl], pts2[inl], cv2.RHO, tol, maxIters=iters, confidence=0.995)
+    fit = np.flatnonzero(inl)
+    if len(fit) > plane_points:  # a random subset holds the plane's share as well
+        fit = np.sort(rng.choice(fit, plane_points, replace=False))
+    H, _ = cv2.findHomography(pts1[fit], pts2[fit], cv2.RHO, tol, maxIters=iters, confidence=0.995)
     if H is None:
         return out
     err_h = transfer_error(H, pts1, pts2)

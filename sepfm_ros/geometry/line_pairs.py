@@ -164,8 +164,6 @@ def hough_point_set(
     M = xy.shape[0]
     x = xy[:, 0].copy()
     y = xy[:, 1].copy()
-    # float32 round half to even of |v| < 2^22: v + 1.5 * 2^23 has a unit last place
-    magic = np.float32(12582912.0)
     rho_f = np.empty(M, dtype=np.float32)
     rows = np.zeros((3, stride), dtype=np.int32)  # angle rows n - 1, n, n + 1 (mod 3)
     cols = np.empty((3, M), dtype=np.int32)  # each point's accumulator column in that row
@@ -183,7 +181,7 @@ def hough_point_set(
             row, col, row_hot = rows[slot], cols[slot], hot[slot]
             c_n, s_n = tab_cos[nxt], tab_sin[nxt]
             for i in range(M):
-                rho_f[i] = (x[i] * c_n + y[i] * s_n - irho_min + magic) - magic
+                rho_f[i] = np.rint(x[i] * c_n + y[i] * s_n - irho_min)  # half to even
             k = 0
             for i in range(M):
                 r = np.int32(rho_f[i])

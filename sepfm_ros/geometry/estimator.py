@@ -68,6 +68,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
+from sepfm_ros.geometry.periodic import is_periodic
 from sepfm_ros.geometry.ransac import (
     Budget,
     RaceOptions,
@@ -137,6 +138,12 @@ class EstimatorOptions:
             lowered sep4/sep5's F-score.
         sample_plane_factor: that check's tolerance on the homography's transfer error, times
             the threshold.
+        periodic_check: a line pair whose H_e inliers on line 1 lie on one projective
+            arithmetic progression (equally spaced 3D points: a row of windows, a chessboard
+            row; ``periodic.is_periodic`` at 2 T1) is ambiguous, its H_e may be off by a
+            period: its stage-2 arm joins the race only after those of the other line pairs, and
+            its matches (ambiguous: they may be off by a period) go last in the PROSAC order of
+            the pools built after it was found (later arms, the fallback).
     """
 
     max_samples: int = 10000
@@ -157,6 +164,7 @@ class EstimatorOptions:
     plane_check_adaptive: bool = True
     sample_plane_check: bool = False
     sample_plane_factor: float = 2.0
+    periodic_check: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -453,6 +461,17 @@ class _Problem:
     rng: np.random.Generator
     budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
     scale: RobustScale = field(default_factory=RobustScale)  #: LMedS: shared by all arms
+    #: (N,) bool, matches on a periodic line pair (``periodic_check``): last in every pool
+    #: built after the pair was found periodic, so PROSAC draws them last
+    ambiguous: np.ndarray | None = None
+
+    def pool_order(self, mask: np.ndarray) -> np.ndarray:
+        """Indices where (N,) bool ``mask``, best first, the ambiguous matches last."""
+        if self.ambiguous is None:
+            return np.flatnonzero(mask)
+        return np.concatenate(
+            [np.flatnonzero(mask & ~self.ambiguous), np.flatnonzero(mask & self.ambiguous)]
+        )
 
     @property
     def lmeds(self) -> bool:
@@ -471,9 +490,11 @@ class _Problem:
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
         left of the budget."""
+        pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         arm = FundamentalProblem(
-            self.data, self.solver, self.threshold, self.scoring, scale=self.scale, lo=self.opt.lo
-        )
+            self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
+            lo=self.opt.lo,
+        )  # fmt: skip
         return run_ransac(
             [arm], self.rng, self.confidence, self.opt.max_samples,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
@@ -498,15 +519,33 @@ def _separable(
     stage1_s = [0.0]
 
     def stage2_arms():
-        """Stage 1 on the next line pair, run only when its stage-2 arm joins the race."""
+        """Stage 1 on the next line pair, run only when its stage-2 arm joins the race; with
+        ``periodic_check``, arms of periodic line pairs are held back until the others joined
+        and their matches go last in the pools built from then on."""
+        held: list[tuple[LineHomographyFit, FundamentalProblem]] = []
         for pair in pairs:
             if len(fits) >= opt.max_line_pairs:
                 return
             t = time.perf_counter()
-            arm = _stage2_arm(problem, pair, size1, size2, scales, est, fits)
+            got = _stage2_arm(problem, pair, size1, size2, scales, est)
+            periodic = (
+                got is not None and opt.periodic_check and _periodic(got[0], d.pts1, scales[0], opt)
+            )
             stage1_s[0] += time.perf_counter() - t
-            if arm is not None:
-                yield arm
+            if periodic:
+                est.periodic_line_pairs += 1
+                held.append(got)
+                if problem.ambiguous is None:
+                    problem.ambiguous = np.zeros(len(d), dtype=bool)
+                problem.ambiguous[pair.support] = True
+            elif got is not None:
+                fits.append(got[0])
+                yield got[1]
+        for fit, arm in held:
+            if len(fits) >= opt.max_line_pairs:
+                return
+            fits.append(fit)
+            yield arm
 
     result = run_ransac(
         stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
@@ -543,10 +582,9 @@ def _stage2_arm(
     size2: tuple[float, float],
     scales: tuple[float, float],
     est: Estimate,
-    fits: list[LineHomographyFit],
-) -> FundamentalProblem | None:
-    """Stage 1 on ``pair``; its stage-2 arm (appending the fit to ``fits``), or None when
-    stage 1 fails or too few matches lie off the pair to sample from."""
+) -> tuple[LineHomographyFit, FundamentalProblem] | None:
+    """Stage 1 on ``pair``: (its fit, its stage-2 arm), or None when stage 1 fails or too few
+    matches lie off the pair to sample from."""
     d, opt = problem.data, problem.opt
     left = problem.budget.left()
     if left < 2:
@@ -562,13 +600,12 @@ def _stage2_arm(
         return None
     off_pair = np.ones(len(d), dtype=bool)
     off_pair[pair.support] = False
-    pool = np.flatnonzero(off_pair)
+    pool = problem.pool_order(off_pair)
     if len(pool) < (7 if problem.solver == "seven" else 8) - 3:
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
-    fits.append(fit)
     tol = opt.sample_plane_factor * problem.threshold if opt.sample_plane_check else 0.0
-    return FundamentalProblem(
+    return fit, FundamentalProblem(
         d,
         problem.solver,
         problem.threshold,
@@ -580,6 +617,17 @@ def _stage2_arm(
         lo=opt.lo,
         plane_tol=tol,
     )
+
+
+def _periodic(
+    fit: LineHomographyFit, pts1: np.ndarray, scale1: float, opt: EstimatorOptions
+) -> bool:
+    """Whether the H_e inliers of ``fit`` on line 1 are a periodic point set: most of them on
+    one projective arithmetic progression (``periodic.is_periodic`` in working px, tolerance
+    2 T1). pts1: (N, 2) all matches in image 1, px; scale1: working px per px of image 1."""
+    c = fit.ctrl1
+    length = float(np.hypot(*(c[1] - c[0]))) * scale1
+    return is_periodic(line_parameter(pts1[fit.inliers], c), length, 2.0 * opt.line_threshold)
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:

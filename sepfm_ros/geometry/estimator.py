@@ -51,7 +51,7 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.degeneracy import plane_and_parallax
+from sepfm_ros.geometry.degeneracy import PlaneCheck, plane_and_parallax, transfer_error
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import (
@@ -68,7 +68,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
-from sepfm_ros.geometry.periodic import is_periodic
+from sepfm_ros.geometry.periodic import is_periodic, shifted_plane_copy
 from sepfm_ros.geometry.ransac import (
     Budget,
     RaceOptions,
@@ -661,7 +661,37 @@ def _plane_check(problem: _Problem, est: Estimate, F: np.ndarray):
         adaptive=problem.opt.plane_check_adaptive,
     )  # fmt: skip
     est.stage2_hypotheses += check.candidates
+    if problem.opt.periodic_check and check.planar and not check.replaced and check.reason is None:
+        check = _periodic_plane_check(problem, est, check)
     return check
+
+
+def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -> PlaneCheck:
+    """The plane check again without the matches on a period-shifted copy of its plane
+    (``periodic.shifted_plane_copy``): they lie off the plane but only say that F's epipole is
+    the vanishing point of the texture's period, so they must not count as parallax. Returns
+    ``check`` when there is no such copy, else the check on the other matches, where F is
+    always challenged by plane-and-parallax candidates (a wrong F through the plane and its
+    copy can gather some chance support off them)."""
+    d, threshold = problem.data, problem.threshold
+    tol = 2.0 * threshold  # the plane check's homography tolerance
+    inl = d.distances(check.F) < threshold
+    far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
+    shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
+    if shifted is None:
+        return check
+    keep = ~shifted
+    p1, p2 = d.pts1[keep], d.pts2[keep]
+    adaptive = problem.opt.plane_check_adaptive
+    # F is challenged by plane-and-parallax candidates whatever its support off the plane
+    # (min_excess beyond any count), then the kept or replaced F is checked as usual
+    challenge = plane_and_parallax(
+        check.F, p1, p2, threshold, problem.rng, adaptive=adaptive, min_excess=len(d) + 1
+    )
+    again = plane_and_parallax(challenge.F, p1, p2, threshold, problem.rng, adaptive=adaptive)
+    est.stage2_hypotheses += challenge.candidates + again.candidates
+    again.replaced = again.replaced or challenge.replaced
+    return again
 
 
 def _final_status(

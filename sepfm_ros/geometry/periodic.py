@@ -221,3 +221,69 @@ def is_periodic(
         t, float(length), float(tol), float(rel), float(cr_tol), int(max_stride), int(refits)
     )
     return hits >= math.ceil(min_share * len(t))
+
+
+def shifted_plane_copy(
+    H: np.ndarray,
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    candidates: np.ndarray,
+    tol: float,
+    rng: np.random.Generator,
+    min_share: float = 0.5,
+    min_points: int = 8,
+    min_self_share: float = 0.3,
+) -> np.ndarray | None:
+    """Matches that follow the plane H shifted by one period of a periodic texture on it.
+
+    On a periodic planar texture (a chessboard, a facade's grid of windows) matches off by one
+    period follow a second homography H2 = H S (S: the texture's period shift in the plane).
+    They lie far from H, so a plane-and-parallax check counts them as parallax; but they carry
+    no information about F beyond the plane: an F with its epipole at the vanishing point of
+    the shift explains both sets. Such an H2 is recognised by what the shift does in image 2:
+    M = H2 H^-1 maps the plane's own points onto other points of the plane (a period), while the
+    homography of a real second plane maps them to arbitrary places.
+
+    Args:
+        H: (3, 3) the plane's homography, image 1 -> image 2.
+        pts1, pts2: (N, 2) all matches, px.
+        candidates: (N,) bool, the matches to test (e.g. inliers of F far from H).
+        tol: px, homography transfer tolerance (also the hit tolerance of M).
+        rng: seeds OpenCV's RANSAC for H2.
+        min_share: H2 must explain this share of the candidates (and ``min_points``).
+        min_self_share: M must map this share of the points on H within ``tol`` of another
+            of them (in image 2).
+    Returns:
+        (N,) bool, the candidates on the shifted copy H2, or None when there is none.
+    """
+    import cv2  # noqa: PLC0415  (OpenCV only for this check)
+
+    from sepfm_ros.geometry.degeneracy import transfer_error  # noqa: PLC0415
+
+    idx = np.flatnonzero(candidates)
+    if len(idx) < min_points:
+        return None
+    cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
+    H2, _ = cv2.findHomography(pts1[idx], pts2[idx], cv2.RHO, tol, maxIters=200, confidence=0.995)
+    if H2 is None:
+        return None
+    on2 = candidates & (transfer_error(H2, pts1, pts2) < tol)
+    k = int(np.count_nonzero(on2))
+    if k < max(min_points, min_share * len(idx)):
+        return None
+    plane = pts2[transfer_error(H, pts1, pts2) < tol]
+    if len(plane) < min_points:
+        return None
+    try:
+        M = H2 @ np.linalg.inv(H)
+    except np.linalg.LinAlgError:
+        return None
+    y = np.c_[plane, np.ones(len(plane))] @ M.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y = y[:, :2] / y[:, 2:]
+    d = np.linalg.norm(y[:, None, :] - plane[None, :, :], axis=2)  # (P, P) px
+    moved = np.linalg.norm(y - plane, axis=1) > tol  # M must move the point (a shift)
+    hits = np.count_nonzero(moved & (np.nanmin(d, axis=1) < tol))
+    if hits < min_self_share * len(plane):
+        return None
+    return on2

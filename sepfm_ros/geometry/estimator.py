@@ -142,8 +142,10 @@ class EstimatorOptions:
             arithmetic progression (equally spaced 3D points: a row of windows, a chessboard
             row; ``periodic.is_periodic`` at 2 T1) is ambiguous, its H_e may be off by a
             period: its stage-2 arm joins the race only after those of the other line pairs, and
-            its matches (ambiguous: they may be off by a period) go last in the PROSAC order of
-            the pools built after it was found (later arms, the fallback).
+            its matches (ambiguous: they may be off by a period) are not sampled by the arms
+            built after it was found and come last in the fallback's PROSAC order. The final
+            plane check also discounts matches on a period-shifted copy of the plane
+            (``periodic.shifted_plane_copy``; a chessboard matched one square off).
     """
 
     max_samples: int = 10000
@@ -461,8 +463,9 @@ class _Problem:
     rng: np.random.Generator
     budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
     scale: RobustScale = field(default_factory=RobustScale)  #: LMedS: shared by all arms
-    #: (N,) bool, matches on a periodic line pair (``periodic_check``): last in every pool
-    #: built after the pair was found periodic, so PROSAC draws them last
+    #: (N,) bool, matches on a periodic line pair (``periodic_check``): left out of the pools
+    #: of the stage-2 arms built after the pair was found periodic, last in the fallback's
+    #: pool (PROSAC draws them last); they are still scored
     ambiguous: np.ndarray | None = None
 
     def pool_order(self, mask: np.ndarray) -> np.ndarray:
@@ -521,7 +524,7 @@ def _separable(
     def stage2_arms():
         """Stage 1 on the next line pair, run only when its stage-2 arm joins the race; with
         ``periodic_check``, arms of periodic line pairs are held back until the others joined
-        and their matches go last in the pools built from then on."""
+        and their matches are left out of the pools built from then on."""
         held: list[tuple[LineHomographyFit, FundamentalProblem]] = []
         for pair in pairs:
             if len(fits) >= opt.max_line_pairs:
@@ -600,7 +603,9 @@ def _stage2_arm(
         return None
     off_pair = np.ones(len(d), dtype=bool)
     off_pair[pair.support] = False
-    pool = problem.pool_order(off_pair)
+    if problem.ambiguous is not None:
+        off_pair &= ~problem.ambiguous  # matches on a periodic line pair: not sampled
+    pool = np.flatnonzero(off_pair)
     if len(pool) < (7 if problem.solver == "seven" else 8) - 3:
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)

@@ -29,6 +29,7 @@ import math
 
 import numba
 import numpy as np
+from scipy.spatial import cKDTree
 
 #: cross ratio of four consecutive points of a projective arithmetic progression
 PROGRESSION_CROSS_RATIO = 4.0 / 3.0
@@ -281,9 +282,10 @@ def shifted_plane_copy(
     y = np.c_[plane, np.ones(len(plane))] @ M.T
     with np.errstate(divide="ignore", invalid="ignore"):
         y = y[:, :2] / y[:, 2:]
-    d = np.linalg.norm(y[:, None, :] - plane[None, :, :], axis=2)  # (P, P) px
-    moved = np.linalg.norm(y - plane, axis=1) > tol  # M must move the point (a shift)
-    hits = np.count_nonzero(moved & (np.nanmin(d, axis=1) < tol))
+    finite = np.isfinite(y).all(axis=1)
+    near, _ = cKDTree(plane).query(y[finite], distance_upper_bound=tol)
+    moved = np.linalg.norm(y[finite] - plane[finite], axis=1) > tol  # M must move the point
+    hits = np.count_nonzero(moved & (near < tol))
     if hits < min_self_share * len(plane):
         return None
     return on2

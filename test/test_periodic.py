@@ -178,3 +178,31 @@ def test_chessboard_with_matches_one_period_off_gives_no_confident_wrong_F(metho
     print(f"[periodic] chessboard, {method}: wrong F with status ok, check off {off}, on {on}")
     assert len(off) >= 2  # the scene does produce the failure
     assert on == []
+
+
+def test_fallback_prosac_reaches_the_whole_pool_within_the_budget_left(monkeypatch):
+    # the fallback after stage 2 has less than max_samples left; PROSAC's T_N is what is left,
+    # so a fallback that runs to the cap has sampled the whole pool uniformly at the end
+    from sepfm_ros.geometry import estimator
+    from sepfm_ros.geometry.correspondences import Correspondences
+    from sepfm_ros.geometry.ransac import Budget
+
+    pts1, pts2, _, _, _ = chessboard_scene(0)
+    opt = estimator.EstimatorOptions(max_samples=1000)
+    budget = Budget(1000)
+    budget.spend(700)
+    problem = estimator._Problem(
+        Correspondences.from_pixels(pts1, pts2), "seven", "msac", 1.0, 0.99, opt,
+        np.random.default_rng(0), budget,
+    )  # fmt: skip
+    seen = {}
+    real = estimator.run_ransac
+
+    def spy(*args, **kwargs):
+        seen["growth"] = kwargs["sampling"].prosac_growth
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(estimator, "run_ransac", spy)
+    result = problem.standard()
+    assert seen["growth"] == 300
+    assert budget.used <= 1000 and result.model is not None

@@ -492,16 +492,24 @@ class _Problem:
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
-        left of the budget."""
+        left of the budget.
+
+        PROSAC's schedule reaches the whole pool (uniform sampling) when what is left of the
+        budget is spent (T_N = samples left): a fallback after stage 2 has less than
+        ``max_samples`` left and would otherwise stop while still drawing from the top of the
+        pool only, which on repetitive texture (a periodic row or a chessboard ranked first)
+        holds the ambiguous matches and the plane.
+        """
         pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         arm = FundamentalProblem(
             self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
             lo=self.opt.lo,
         )  # fmt: skip
+        sampling = replace(self.opt.sampling(), prosac_growth=max(1, self.budget.left()))
         return run_ransac(
             [arm], self.rng, self.confidence, self.opt.max_samples,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
-            budget=self.budget, sampling=self.opt.sampling(),
+            budget=self.budget, sampling=sampling,
         )  # fmt: skip
 
 

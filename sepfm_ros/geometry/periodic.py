@@ -260,12 +260,15 @@ def shifted_plane_copy(
     import cv2  # noqa: PLC0415  (OpenCV only for this check)
 
     from sepfm_ros.geometry.degeneracy import transfer_error  # noqa: PLC0415
+    from sepfm_ros.geometry.ransac import ransac_trials  # noqa: PLC0415
 
     idx = np.flatnonzero(candidates)
     if len(idx) < min_points:
         return None
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    H2, _ = cv2.findHomography(pts1[idx], pts2[idx], cv2.RHO, tol, maxIters=200, confidence=0.995)
+    # F(4, 1 - min_share) samples find an H2 holding min_share of the candidates (p = 0.995)
+    iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=500)
+    H2, _ = cv2.findHomography(pts1[idx], pts2[idx], cv2.RHO, tol, maxIters=iters, confidence=0.995)
     if H2 is None:
         return None
     on2 = candidates & (transfer_error(H2, pts1, pts2) < tol)

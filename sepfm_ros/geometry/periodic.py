@@ -234,6 +234,7 @@ def shifted_plane_copy(
     min_share: float = 0.5,
     min_points: int = 8,
     min_self_share: float = 0.3,
+    rel: float = 0.15,
 ) -> np.ndarray | None:
     """Matches that follow the plane H shifted by one period of a periodic texture on it.
 
@@ -252,8 +253,10 @@ def shifted_plane_copy(
         tol: px, homography transfer tolerance (also the hit tolerance of M).
         rng: seeds OpenCV's RANSAC for H2.
         min_share: H2 must explain this share of the candidates (and ``min_points``).
-        min_self_share: M must map this share of the points on H within ``tol`` of another
-            of them (in image 2).
+        min_self_share: M must map this share of the points on H onto another of them (in
+            image 2, within min(``tol``, ``rel`` times the point's shift)), and three times as
+            many as land that close to uniform random points of the plane's bounding box
+            (chance: with a large ``tol`` every point of a dense plane is near another).
     Returns:
         (N,) bool, the candidates on the shifted copy H2, or None when there is none.
     """
@@ -286,9 +289,15 @@ def shifted_plane_copy(
     with np.errstate(divide="ignore", invalid="ignore"):
         y = y[:, :2] / y[:, 2:]
     finite = np.isfinite(y).all(axis=1)
-    near, _ = cKDTree(plane).query(y[finite], distance_upper_bound=tol)
-    moved = np.linalg.norm(y[finite] - plane[finite], axis=1) > tol  # M must move the point
-    hits = np.count_nonzero(moved & (near < tol))
-    if hits < min_self_share * len(plane):
+    shift = np.linalg.norm(y[finite] - plane[finite], axis=1)
+    radius = np.minimum(tol, rel * shift)  # px, relative to the shift as in the 1D test
+    tree = cKDTree(plane)
+    near, _ = tree.query(y[finite], distance_upper_bound=tol)
+    hits = np.count_nonzero((shift > tol) & (near < radius))
+    # chance: the same radii around uniform points in the plane's bounding box
+    probe = rng.uniform(plane.min(axis=0), plane.max(axis=0), (len(radius), 2))
+    near_probe, _ = tree.query(probe, distance_upper_bound=tol)
+    chance = np.count_nonzero(near_probe < radius)
+    if hits < max(min_self_share * len(plane), 3.0 * chance):
         return None
     return on2

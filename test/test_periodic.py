@@ -146,13 +146,13 @@ def chessboard_scene(seed: int, shifted_share: float = 0.2, n_background: int = 
     return pts1, pts2, (w, h), F, symmetric_epipolar_distance(F, pts1, pts2) < 1.0
 
 
-def _wrong_and_ok(method: str, periodic_check: bool) -> list[int]:
+def _wrong_and_ok(method: str, shifted_plane_check: bool) -> list[int]:
     """Seeds of the chessboard scene where ``method`` returns a wrong F with status "ok"."""
     bad = []
     for seed in range(12):
         pts1, pts2, size, _, inl = chessboard_scene(seed)
         est = estimate_fundamental(
-            pts1, pts2, size, method=method, seed=0, periodic_check=periodic_check
+            pts1, pts2, size, method=method, seed=0, shifted_plane_check=shifted_plane_check
         )
         share = np.count_nonzero(est.inliers & inl) / np.count_nonzero(inl)
         false = np.count_nonzero(est.inliers & ~inl)
@@ -173,8 +173,8 @@ def test_chessboard_with_matches_one_period_off_gives_no_confident_wrong_F(metho
     # Without the check the plane-and-parallax test took the shifted corners for parallax and
     # kept an F through the plane and its shifted copy ("ok", about 60 % of the true inliers)
     # on 6 (sep4), 8 (sep5) and 4 (ransac7) of these 12 seeds.
-    off = _wrong_and_ok(method, periodic_check=False)
-    on = _wrong_and_ok(method, periodic_check=True)
+    off = _wrong_and_ok(method, shifted_plane_check=False)
+    on = _wrong_and_ok(method, shifted_plane_check=True)
     print(f"[periodic] chessboard, {method}: wrong F with status ok, check off {off}, on {on}")
     assert len(off) >= 2  # the scene does produce the failure
     assert on == []

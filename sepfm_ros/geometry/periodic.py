@@ -235,6 +235,7 @@ def shifted_plane_copy(
     min_points: int = 8,
     min_self_share: float = 0.3,
     rel: float = 0.15,
+    max_fit: int = 300,
 ) -> np.ndarray | None:
     """Matches that follow the plane H shifted by one period of a periodic texture on it.
 
@@ -257,6 +258,7 @@ def shifted_plane_copy(
             image 2, within min(``tol``, ``rel`` times the point's shift)), and three times as
             many as land that close to uniform random points of the plane's bounding box
             (chance: with a large ``tol`` every point of a dense plane is near another).
+        max_fit: most candidates H2 is searched on (a random subset; it is scored on all).
     Returns:
         (N,) bool, the candidates on the shifted copy H2, or None when there is none.
     """
@@ -268,6 +270,9 @@ def shifted_plane_copy(
     idx = np.flatnonzero(candidates)
     if len(idx) < min_points:
         return None
+    n_candidates = len(idx)
+    if len(idx) > max_fit:  # H2 is searched on a random subset (scored on all candidates)
+        idx = np.sort(rng.choice(idx, max_fit, replace=False))
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
     # F(4, 1 - min_share) samples find an H2 holding min_share of the candidates (p = 0.995)
     iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=500)
@@ -276,7 +281,7 @@ def shifted_plane_copy(
         return None
     on2 = candidates & (transfer_error(H2, pts1, pts2) < tol)
     k = int(np.count_nonzero(on2))
-    if k < max(min_points, min_share * len(idx)):
+    if k < max(min_points, min_share * n_candidates):
         return None
     plane = pts2[transfer_error(H, pts1, pts2) < tol]
     if len(plane) < min_points:

@@ -55,6 +55,7 @@ class PlaneCheck:
         candidates: plane-and-parallax models scored.
         off_plane_chance: off-plane inliers expected by chance (shuffled pairs), mean.
         reason: why F is not supported off the plane ("degenerate: ..."), or None.
+        H: the homography of the plane that was tested, or None.
     """
 
     F: np.ndarray
@@ -65,6 +66,7 @@ class PlaneCheck:
     candidates: int = 0
     off_plane_chance: float = 0.0
     reason: str | None = None
+    H: np.ndarray | None = None  #: (3, 3) the plane's homography (image 1 -> 2) when found
 
 
 def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -167,6 +169,7 @@ def plane_and_parallax(
     H, _ = cv2.findHomography(pts1[fit], pts2[fit], cv2.RHO, tol, maxIters=iters, confidence=0.995)
     if H is None:
         return out
+    out.H = H
     err_h = transfer_error(H, pts1, pts2)
     on = err_h < tol
     far = err_h > parallax_factor * tol  # clear parallax: evidence about F beyond the plane

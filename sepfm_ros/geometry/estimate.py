@@ -30,6 +30,9 @@ class Estimate:
         samples: minimal samples drawn, every stage together (stage 1's 3-point samples,
             stage 2, fallback); at most the ``max_samples`` option.
         fallback: True when standard RANSAC ran because no usable line pair was found.
+        periodic_line_pairs: line pairs whose H_e support was found periodic (a row of equally
+            spaced points, ``EstimatorOptions.periodic_check``) and whose arms joined stage 2
+            after the others.
         status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
         method: the method name that produced this estimate.
         timings_ms: milliseconds per stage ("lines", "stage1", "stage2", "refine", "total").
@@ -49,6 +52,7 @@ class Estimate:
     control_points: tuple[np.ndarray, np.ndarray] | None = None
     samples: int = 0
     fallback: bool = False
+    periodic_line_pairs: int = 0
     status: str = "ok"
     method: str = ""
     timings_ms: dict[str, float] = field(default_factory=dict)

@@ -51,7 +51,7 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.degeneracy import plane_and_parallax
+from sepfm_ros.geometry.degeneracy import PlaneCheck, plane_and_parallax, transfer_error
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import (
@@ -68,6 +68,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
+from sepfm_ros.geometry.periodic import is_periodic, shifted_plane_copy
 from sepfm_ros.geometry.ransac import (
     Budget,
     RaceOptions,
@@ -137,6 +138,17 @@ class EstimatorOptions:
             lowered sep4/sep5's F-score.
         sample_plane_factor: that check's tolerance on the homography's transfer error, times
             the threshold.
+        periodic_check: a line pair whose H_e inliers on line 1 lie on one projective
+            arithmetic progression (equally spaced 3D points: a row of windows, a chessboard
+            row; ``periodic.is_periodic`` at 2 T1) is ambiguous, its H_e may be off by a
+            period: its stage-2 arm joins the race only after those of the other line pairs, and
+            its matches (ambiguous: they may be off by a period) are not sampled by the arms
+            built after it was found and come last in the fallback's PROSAC order. Off by
+            default: on the real sets it fired on 1-3 % of the pairs, all matched correctly,
+            and lowered sep4's F-score there slightly (docs/design.md, repetitive structure).
+        shifted_plane_check: the final plane check discounts matches on a period-shifted copy
+            of the plane (``periodic.shifted_plane_copy``; a chessboard matched one square off)
+            and then challenges F with plane-and-parallax candidates.
     """
 
     max_samples: int = 10000
@@ -157,6 +169,8 @@ class EstimatorOptions:
     plane_check_adaptive: bool = True
     sample_plane_check: bool = False
     sample_plane_factor: float = 2.0
+    periodic_check: bool = False
+    shifted_plane_check: bool = True
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -458,6 +472,18 @@ class _Problem:
     rng: np.random.Generator
     budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
     scale: RobustScale = field(default_factory=RobustScale)  #: LMedS: shared by all arms
+    #: (N,) bool, matches on a periodic line pair (``periodic_check``): left out of the pools
+    #: of the stage-2 arms built after the pair was found periodic, last in the fallback's
+    #: pool (PROSAC draws them last); they are still scored
+    ambiguous: np.ndarray | None = None
+
+    def pool_order(self, mask: np.ndarray) -> np.ndarray:
+        """Indices where (N,) bool ``mask``, best first, the ambiguous matches last."""
+        if self.ambiguous is None:
+            return np.flatnonzero(mask)
+        return np.concatenate(
+            [np.flatnonzero(mask & ~self.ambiguous), np.flatnonzero(mask & self.ambiguous)]
+        )
 
     @property
     def lmeds(self) -> bool:
@@ -475,14 +501,24 @@ class _Problem:
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
-        left of the budget."""
+        left of the budget.
+
+        PROSAC's schedule reaches the whole pool (uniform sampling) when what is left of the
+        budget is spent (T_N = samples left): a fallback after stage 2 has less than
+        ``max_samples`` left and would otherwise stop while still drawing from the top of the
+        pool only, which on repetitive texture (a periodic row or a chessboard ranked first)
+        holds the ambiguous matches and the plane.
+        """
+        pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         arm = FundamentalProblem(
-            self.data, self.solver, self.threshold, self.scoring, scale=self.scale, lo=self.opt.lo
-        )
+            self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
+            lo=self.opt.lo,
+        )  # fmt: skip
+        sampling = replace(self.opt.sampling(), prosac_growth=max(1, self.budget.left()))
         return run_ransac(
             [arm], self.rng, self.confidence, self.opt.max_samples,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
-            budget=self.budget, sampling=self.opt.sampling(),
+            budget=self.budget, sampling=sampling,
         )  # fmt: skip
 
 
@@ -503,15 +539,33 @@ def _separable(
     stage1_s = [0.0]
 
     def stage2_arms():
-        """Stage 1 on the next line pair, run only when its stage-2 arm joins the race."""
+        """Stage 1 on the next line pair, run only when its stage-2 arm joins the race; with
+        ``periodic_check``, arms of periodic line pairs are held back until the others joined
+        and their matches are left out of the pools built from then on."""
+        held: list[tuple[LineHomographyFit, FundamentalProblem]] = []
         for pair in pairs:
             if len(fits) >= opt.max_line_pairs:
                 return
             t = time.perf_counter()
-            arm = _stage2_arm(problem, pair, size1, size2, scales, est, fits)
+            got = _stage2_arm(problem, pair, size1, size2, scales, est)
+            periodic = (
+                got is not None and opt.periodic_check and _periodic(got[0], d.pts1, scales[0], opt)
+            )
             stage1_s[0] += time.perf_counter() - t
-            if arm is not None:
-                yield arm
+            if periodic:
+                est.periodic_line_pairs += 1
+                held.append(got)
+                if problem.ambiguous is None:
+                    problem.ambiguous = np.zeros(len(d), dtype=bool)
+                problem.ambiguous[pair.support] = True
+            elif got is not None:
+                fits.append(got[0])
+                yield got[1]
+        for fit, arm in held:
+            if len(fits) >= opt.max_line_pairs:
+                return
+            fits.append(fit)
+            yield arm
 
     result = run_ransac(
         stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
@@ -548,10 +602,9 @@ def _stage2_arm(
     size2: tuple[float, float],
     scales: tuple[float, float],
     est: Estimate,
-    fits: list[LineHomographyFit],
-) -> FundamentalProblem | None:
-    """Stage 1 on ``pair``; its stage-2 arm (appending the fit to ``fits``), or None when
-    stage 1 fails or too few matches lie off the pair to sample from."""
+) -> tuple[LineHomographyFit, FundamentalProblem] | None:
+    """Stage 1 on ``pair``: (its fit, its stage-2 arm), or None when stage 1 fails or too few
+    matches lie off the pair to sample from."""
     d, opt = problem.data, problem.opt
     left = problem.budget.left()
     if left < 2:
@@ -567,13 +620,14 @@ def _stage2_arm(
         return None
     off_pair = np.ones(len(d), dtype=bool)
     off_pair[pair.support] = False
+    if problem.ambiguous is not None:
+        off_pair &= ~problem.ambiguous  # matches on a periodic line pair: not sampled
     pool = np.flatnonzero(off_pair)
     if len(pool) < (7 if problem.solver == "seven" else 8) - 3:
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
-    fits.append(fit)
     tol = opt.sample_plane_factor * problem.threshold if opt.sample_plane_check else 0.0
-    return FundamentalProblem(
+    return fit, FundamentalProblem(
         d,
         problem.solver,
         problem.threshold,
@@ -585,6 +639,17 @@ def _stage2_arm(
         lo=opt.lo,
         plane_tol=tol,
     )
+
+
+def _periodic(
+    fit: LineHomographyFit, pts1: np.ndarray, scale1: float, opt: EstimatorOptions
+) -> bool:
+    """Whether the H_e inliers of ``fit`` on line 1 are a periodic point set: most of them on
+    one projective arithmetic progression (``periodic.is_periodic`` in working px, tolerance
+    2 T1). pts1: (N, 2) all matches in image 1, px; scale1: working px per px of image 1."""
+    c = fit.ctrl1
+    length = float(np.hypot(*(c[1] - c[0]))) * scale1
+    return is_periodic(line_parameter(pts1[fit.inliers], c), length, 2.0 * opt.line_threshold)
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
@@ -618,7 +683,40 @@ def _plane_check(problem: _Problem, est: Estimate, F: np.ndarray):
         adaptive=problem.opt.plane_check_adaptive,
     )  # fmt: skip
     est.stage2_hypotheses += check.candidates
+    opt = problem.opt
+    if opt.shifted_plane_check and check.planar and not check.replaced and check.reason is None:
+        check = _periodic_plane_check(problem, est, check)
     return check
+
+
+def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -> PlaneCheck:
+    """The plane check again without the matches on a period-shifted copy of its plane
+    (``periodic.shifted_plane_copy``): they lie off the plane but only say that F's epipole is
+    the vanishing point of the texture's period, so they must not count as parallax. Returns
+    ``check`` when there is no such copy, else the check on the other matches, where F is
+    always challenged by plane-and-parallax candidates (a wrong F through the plane and its
+    copy can gather some chance support off them)."""
+    d, threshold = problem.data, problem.threshold
+    tol = 2.0 * threshold  # the plane check's homography tolerance
+    inl = d.distances(check.F) < threshold
+    far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
+    shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
+    if shifted is None:  # a copy F does not explain: F may still ignore the parallax
+        shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15)
+    if shifted is None:
+        return check
+    keep = ~shifted
+    p1, p2 = d.pts1[keep], d.pts2[keep]
+    adaptive = problem.opt.plane_check_adaptive
+    # F is challenged by plane-and-parallax candidates whatever its support off the plane
+    # (min_excess beyond any count), then the kept or replaced F is checked as usual
+    challenge = plane_and_parallax(
+        check.F, p1, p2, threshold, problem.rng, adaptive=adaptive, min_excess=len(d) + 1
+    )
+    again = plane_and_parallax(challenge.F, p1, p2, threshold, problem.rng, adaptive=adaptive)
+    est.stage2_hypotheses += challenge.candidates + again.candidates
+    again.replaced = again.replaced or challenge.replaced
+    return again
 
 
 def _final_status(

@@ -27,9 +27,13 @@ from __future__ import annotations
 
 import math
 
+import cv2
 import numba
 import numpy as np
 from scipy.spatial import cKDTree
+
+from sepfm_ros.geometry.degeneracy import transfer_error
+from sepfm_ros.geometry.ransac import ransac_trials
 
 #: cross ratio of four consecutive points of a projective arithmetic progression
 PROGRESSION_CROSS_RATIO = 4.0 / 3.0
@@ -262,11 +266,6 @@ def shifted_plane_copy(
     Returns:
         (N,) bool, the candidates on the shifted copy H2, or None when there is none.
     """
-    import cv2  # noqa: PLC0415  (OpenCV only for this check)
-
-    from sepfm_ros.geometry.degeneracy import transfer_error  # noqa: PLC0415
-    from sepfm_ros.geometry.ransac import ransac_trials  # noqa: PLC0415
-
     idx = np.flatnonzero(candidates)
     if len(idx) < min_points:
         return None

@@ -701,7 +701,8 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
     inl = d.distances(check.F) < threshold
     far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
     shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
-    if shifted is None:  # a copy F does not explain: F may still ignore the parallax
+    if shifted is None and np.count_nonzero(inl & far) < 8:
+        # a copy F does not explain: F may still ignore the parallax
         shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15)
     if shifted is None:
         return check

@@ -94,6 +94,7 @@ METHODS = tuple(_METHODS)
 #: the one that measures best (docs/benchmarks.md, ablation and hard-set sections).
 DEFAULT_METHOD = "sep4"
 TRIPLES = ("raw", "synthesized", "all")
+RACE_POOLS = ("support", "model")
 #: Most 3-point samples of stage 1 per line pair and control-point orientation (two orientations).
 STAGE1_MAX_SAMPLES = 200
 
@@ -137,6 +138,12 @@ class EstimatorOptions:
             lowered sep4/sep5's F-score.
         sample_plane_factor: that check's tolerance on the homography's transfer error, times
             the threshold.
+        race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
+            F(k, r) stop besides the leader's: ``"support"``, arms with at least
+            ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
+            model has at least ``race_pool_ratio`` of the best model's inliers among its own
+            (``RaceOptions.pool_rule`` / ``pool_ratio``; docs/benchmarks.md, race and line
+            thresholds section).
     """
 
     max_samples: int = 10000
@@ -157,6 +164,8 @@ class EstimatorOptions:
     plane_check_adaptive: bool = True
     sample_plane_check: bool = False
     sample_plane_factor: float = 2.0
+    race_pool: str = "support"
+    race_pool_ratio: float = 0.8
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -174,11 +183,13 @@ class EstimatorOptions:
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
-        for name in ("line_distance", "line_threshold", "sample_plane_factor"):
+        for name in ("line_distance", "line_threshold", "sample_plane_factor", "race_pool_ratio"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
         if self.triple not in TRIPLES:
             raise ValueError(f"triple must be one of {TRIPLES}, got {self.triple!r}")
+        if self.race_pool not in RACE_POOLS:
+            raise ValueError(f"race_pool must be one of {RACE_POOLS}, got {self.race_pool!r}")
         if self.lo not in LO_SCHEMES:
             raise ValueError(f"lo must be one of {tuple(LO_SCHEMES)}, got {self.lo!r}")
 
@@ -509,7 +520,8 @@ def _separable(
                 yield arm
 
     result = run_ransac(
-        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
+        stage2_arms(), problem.rng, problem.confidence, opt.max_samples,
+        race=RaceOptions(pool_rule=opt.race_pool, pool_ratio=opt.race_pool_ratio),
         budget=problem.budget,
         sampling=opt.sampling(),
         min_samples=problem.min_samples(problem.model_points - 3),

@@ -1,20 +1,20 @@
 """Benchmark: the race's pooling rule and the line thresholds of the default method, each
-alternative against the current values, same run, same matches, three seeds.
+alternative against the default options, same run, same matches, three seeds.
 
 Two choices of the separable estimator are measured here:
 
 - which racing stage-2 arms count their samples toward the pooled F(k, r) stop
   (``EstimatorOptions.race_pool`` / ``race_pool_ratio``, ``RaceOptions.pool_rule`` /
   ``pool_ratio``): by support, arms with at least a share of the best model's inlier count
-  (0.8 now; 0.9, 0.95, 1.0), or by model, arms whose best model holds most of the best model's
+  (0.8, 0.9, 0.95, 1.0), or by model, arms whose best model holds most of the best model's
   inliers (at least 0.8 / 0.9 of them);
 - the stage-1 threshold T1 (``line_threshold``) and the incidence distance C
   (``line_distance``), stated in working px of the ``hough_width`` (512 px) line search, so in
   image px they grow with the image width (x 1241 / 512 on KITTI); the alternatives state them
-  in image px: equal to the current values at 640 px width, or tied to F's 1 px threshold
-  (T1 = 0.5 / 1 px, C = 1.5 / 2 / 3 px), and two variants of the working-px values. An
-  image-px value v is passed as v * hough_width / image width (every pair here has two images
-  of one width, where this is exact).
+  in image px (equal to 0.5 and 1.5 working px at 640 px width, or tied to F's 1 px threshold:
+  T1 = 0.5 / 1 px, C = 1.5 / 2 / 3 px), or take other working-px values (T1 and C alone too).
+  An image-px value v is passed as v * hough_width / image width (every pair here has two
+  images of one width, where this is exact).
 
 Sets, threshold 1 px, confidence 0.99:
 
@@ -25,9 +25,9 @@ Sets, threshold 1 px, confidence 0.99:
   ratio 0.8, the node's own matching), pairs with >= 20 GT inliers (all of them when fewer
   than ``--max-pairs``).
 
-Printed per set and configuration: mean F-score, its change against the current values per
-seed, success % (median GT-inlier error < 1 px and >= 20 GT inliers recovered), median
-hypotheses, median ms and ms over the current configuration's (same run).
+Printed per set and configuration: mean F-score, its change against the defaults per seed,
+success % (median GT-inlier error < 1 px and >= 20 GT inliers recovered), median hypotheses,
+median ms and ms over the defaults' (same run).
 
     python benchmarks/bench_race_lines.py [--sets lines75,lines95,shared95,kitti,temple]
         [--max-pairs 100] [--step 1] [--seeds 0,1,2] [--configs "label;label"] [--cache DIR]
@@ -108,9 +108,11 @@ ALTERNATIVES: dict[str, Callable[[tuple[int, int]], dict]] = {
     "T1 0.5, C 1.5 working px": _fixed(line_threshold=0.5, line_distance=1.5),
     "T1 0.35, C 1.0 working px": _fixed(line_threshold=0.35, line_distance=1.0),
     "T1 0.75, C 2.25 working px": _fixed(line_threshold=0.75, line_distance=2.25),
-    "T1 0.75, C 1.5 working px": _fixed(line_threshold=0.75, line_distance=1.5),
-    "T1 0.5, C 2.25 working px": _fixed(line_threshold=0.5, line_distance=2.25),
     "T1 1, C 3 working px": _fixed(line_threshold=1.0, line_distance=3.0),
+    "T1 1.5, C 4.5 working px": _fixed(line_threshold=1.5, line_distance=4.5),
+    "T1 1.5, C 1.5 working px": _fixed(line_threshold=1.5, line_distance=1.5),
+    "T1 0.5, C 4.5 working px": _fixed(line_threshold=0.5, line_distance=4.5),
+    "T1 2, C 6 working px": _fixed(line_threshold=2.0, line_distance=6.0),
 }
 CONFIGS = {CURRENT: _fixed(), **ALTERNATIVES}
 
@@ -178,7 +180,7 @@ def table(rows: dict, seeds: list[int]) -> str:
     base_f = [base[s][:, 1].mean() for s in seeds]
     out = [
         "| configuration | F-score | ΔF-score per seed | success % | Δsuccess % per seed | "
-        "hypotheses (median) | ms (median) | ms / current |",
+        "hypotheses (median) | ms (median) | ms / defaults |",
         "|---|---|---|---|---|---|---|---|",
     ]
     for label, by_seed in rows.items():
@@ -196,7 +198,7 @@ def table(rows: dict, seeds: list[int]) -> str:
         )
     out += [
         "",
-        f"Seed noise of the current values: mean F-score per seed "
+        f"Seed noise of the defaults: mean F-score per seed "
         f"{' / '.join(f'{f:.4f}' for f in base_f)} (spread {max(base_f) - min(base_f):.4f}).",
     ]
     return "\n".join(out)
@@ -239,7 +241,7 @@ def main(argv: list[str] | None = None) -> int:
         command = bench_docs.command_line("bench_race_lines.py", args)
         head = (
             f"Default method {DEFAULT_METHOD}, threshold 1 px, confidence 0.99. ΔF-score and "
-            "Δsuccess: configuration minus the current values on the same pairs and seed, one "
+            "Δsuccess: configuration minus the defaults on the same pairs and seed, one "
             "figure per seed. Options are `EstimatorOptions` fields (see the script's docstring)."
         )
         body = "\n\n".join([head, *parts])

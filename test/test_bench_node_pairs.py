@@ -79,7 +79,7 @@ def test_race_lines_two_configurations_three_seeds(shared_data, tmp_path, capsys
     row = re.search(rf"^\| {label} \| (\S+) \| (\S+) / (\S+) / (\S+) \| (\S+) \|", out, re.M)
     assert row
     assert all(-1.0 <= float(row.group(i)) <= 1.0 for i in (2, 3, 4))
-    assert "Seed noise of the current values: mean F-score per seed" in out
+    assert "Seed noise of the defaults: mean F-score per seed" in out
     body = bench_docs.read_block(doc.read_text(), "bench_race_lines")
     assert body.startswith(f"## Race pooling and line thresholds of {DEFAULT_METHOD}")
     assert "--configs" in body and "**kitti**" in body

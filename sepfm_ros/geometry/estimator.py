@@ -113,10 +113,14 @@ class EstimatorOptions:
         refine: Sampson (IRLS) refinement of the final model.
         hough_width: working resolution of the line search, px.
         hough_min_votes: least votes of a Hough line.
-        line_distance: C, the point-line incidence distance, working px.
+        line_distance: C, the point-line incidence distance, working px (in image px
+            C x image width / ``hough_width``: 7.3 px at KITTI's 1241 px, 3.75 px at 640 px).
         hough_points: best matches drawn into the binary images of the line search.
         max_line_pairs: line pairs whose stage-2 arms race.
-        line_threshold: T1, the H_e inlier threshold of stage 1, working px.
+        line_threshold: T1, the H_e inlier threshold of stage 1, working px. T1 and C scale
+            with the image width, not with F's threshold; their values against image-px and
+            other working-px values: docs/benchmarks.md, section "Race pooling and line
+            thresholds" (bench_race_lines.py).
         min_line_inliers: line correspondences that must agree with H_e (>= 3).
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
@@ -150,10 +154,10 @@ class EstimatorOptions:
     refine: bool = True
     hough_width: int = 512
     hough_min_votes: int = 4
-    line_distance: float = 1.5
+    line_distance: float = 3.0
     hough_points: int = 300
     max_line_pairs: int = 4
-    line_threshold: float = 0.5
+    line_threshold: float = 1.0
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True

@@ -120,7 +120,8 @@ class EstimatorOptions:
         line_threshold: T1, the H_e inlier threshold of stage 1, working px. T1 and C scale
             with the image width, not with F's threshold; their values against image-px and
             other working-px values: docs/benchmarks.md, section "Race pooling and line
-            thresholds" (bench_race_lines.py).
+            thresholds" (bench_race_lines.py). Looser values (1.5 / 4.5) let a wrong F pass
+            as "ok" on a synthetic plane-majority scene (test_plane_sampling.py).
         min_line_inliers: line correspondences that must agree with H_e (>= 3).
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.

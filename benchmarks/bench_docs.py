@@ -29,8 +29,10 @@ SECTIONS = {
     "bench_estimators": "python benchmarks/bench_estimators.py --write-docs",
     "bench_lines": "python benchmarks/bench_lines.py --write-docs",
     "bench_ablation": "python benchmarks/bench_ablation.py --write-docs",
+    "bench_race_lines": "python benchmarks/bench_race_lines.py --write-docs",
     "bench_outliers": "python benchmarks/bench_outliers.py --write-docs",
     "bench_node": "python benchmarks/bench_node.py --write-docs",
+    "bench_node_pairs": "python benchmarks/bench_node_pairs.py --write-docs",
     "bench_robustness": "python benchmarks/bench_robustness.py --write-docs",
 }
 PREAMBLE = """# Benchmarks

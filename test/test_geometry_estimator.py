@@ -211,3 +211,19 @@ def test_one_sample_budget_per_call_shared_by_every_stage(method):
         sp.pts1, sp.pts2, sp.image_size, method=method, seed=0, max_samples=50
     )
     assert 0 < small.samples <= 50
+
+
+def test_race_pool_options_are_checked_and_used():
+    from sepfm_ros.geometry.estimator import EstimatorOptions
+
+    with pytest.raises(ValueError, match="race_pool must be one of"):
+        EstimatorOptions(race_pool="leader")
+    with pytest.raises(ValueError, match="race_pool_ratio must be positive"):
+        EstimatorOptions(race_pool_ratio=0)
+    sp = make_pair(n_inliers=150, n_outliers=174, n_lines=2, noise=0.5, seed=5)
+    for pool in ("support", "model"):
+        est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep4", threshold=2.0,
+                                   seed=1, race_pool=pool, race_pool_ratio=0.9)  # fmt: skip
+        assert est.F is not None and est.line_pair is not None
+        recovered = np.count_nonzero(est.inliers & sp.is_inlier) / np.count_nonzero(sp.is_inlier)
+        assert recovered >= 0.95, f"{pool} recovered {recovered:.3f}"

@@ -95,8 +95,12 @@ METHODS = tuple(_METHODS)
 #: the one that measures best (docs/benchmarks.md, ablation and hard-set sections).
 DEFAULT_METHOD = "sep4"
 TRIPLES = ("raw", "synthesized", "all")
+RACE_POOLS = ("support", "model")
 #: Most 3-point samples of stage 1 per line pair and control-point orientation (two orientations).
 STAGE1_MAX_SAMPLES = 200
+#: Tolerance (working px) of the periodic line-pair test (``periodic_check``): a point is on a
+#: progression's node within min(this, 0.15 of the local period).
+PERIODIC_TOLERANCE = 1.0
 
 
 @dataclass(frozen=True)
@@ -113,10 +117,15 @@ class EstimatorOptions:
         refine: Sampson (IRLS) refinement of the final model.
         hough_width: working resolution of the line search, px.
         hough_min_votes: least votes of a Hough line.
-        line_distance: C, the point-line incidence distance, working px.
+        line_distance: C, the point-line incidence distance, working px (in image px
+            C x image width / ``hough_width``: 7.3 px at KITTI's 1241 px, 3.75 px at 640 px).
         hough_points: best matches drawn into the binary images of the line search.
         max_line_pairs: line pairs whose stage-2 arms race.
-        line_threshold: T1, the H_e inlier threshold of stage 1, working px.
+        line_threshold: T1, the H_e inlier threshold of stage 1, working px. T1 and C scale
+            with the image width, not with F's threshold; their values against image-px and
+            other working-px values: docs/benchmarks.md, section "Race pooling and line
+            thresholds" (bench_race_lines.py). Looser values (1.5 / 4.5) let a wrong F pass
+            as "ok" on a synthetic plane-majority scene (test_plane_sampling.py).
         min_line_inliers: line correspondences that must agree with H_e (>= 3).
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
@@ -149,16 +158,22 @@ class EstimatorOptions:
         shifted_plane_check: the final plane check discounts matches on a period-shifted copy
             of the plane (``periodic.shifted_plane_copy``; a chessboard matched one square off)
             and then challenges F with plane-and-parallax candidates.
+        race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
+            F(k, r) stop besides the leader's: ``"support"``, arms with at least
+            ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
+            model has at least ``race_pool_ratio`` of the best model's inliers among its own
+            (``RaceOptions.pool_rule`` / ``pool_ratio``; docs/benchmarks.md, race and line
+            thresholds section).
     """
 
     max_samples: int = 10000
     refine: bool = True
     hough_width: int = 512
     hough_min_votes: int = 4
-    line_distance: float = 1.5
+    line_distance: float = 3.0
     hough_points: int = 300
     max_line_pairs: int = 4
-    line_threshold: float = 0.5
+    line_threshold: float = 1.0
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
@@ -171,6 +186,8 @@ class EstimatorOptions:
     sample_plane_factor: float = 2.0
     periodic_check: bool = False
     shifted_plane_check: bool = True
+    race_pool: str = "support"
+    race_pool_ratio: float = 0.8
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -188,11 +205,13 @@ class EstimatorOptions:
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
-        for name in ("line_distance", "line_threshold", "sample_plane_factor"):
+        for name in ("line_distance", "line_threshold", "sample_plane_factor", "race_pool_ratio"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
         if self.triple not in TRIPLES:
             raise ValueError(f"triple must be one of {TRIPLES}, got {self.triple!r}")
+        if self.race_pool not in RACE_POOLS:
+            raise ValueError(f"race_pool must be one of {RACE_POOLS}, got {self.race_pool!r}")
         if self.lo not in LO_SCHEMES:
             raise ValueError(f"lo must be one of {tuple(LO_SCHEMES)}, got {self.lo!r}")
 
@@ -568,7 +587,8 @@ def _separable(
             yield arm
 
     result = run_ransac(
-        stage2_arms(), problem.rng, problem.confidence, opt.max_samples, race=RaceOptions(),
+        stage2_arms(), problem.rng, problem.confidence, opt.max_samples,
+        race=RaceOptions(pool_rule=opt.race_pool, pool_ratio=opt.race_pool_ratio),
         budget=problem.budget,
         sampling=opt.sampling(),
         min_samples=problem.min_samples(problem.model_points - 3),
@@ -646,10 +666,11 @@ def _periodic(
 ) -> bool:
     """Whether the H_e inliers of ``fit`` on line 1 are a periodic point set: most of them on
     one projective arithmetic progression (``periodic.is_periodic`` in working px, tolerance
-    2 T1). pts1: (N, 2) all matches in image 1, px; scale1: working px per px of image 1."""
+    PERIODIC_TOLERANCE). pts1: (N, 2) all matches in image 1, px; scale1: working px per px of
+    image 1."""
     c = fit.ctrl1
     length = float(np.hypot(*(c[1] - c[0]))) * scale1
-    return is_periodic(line_parameter(pts1[fit.inliers], c), length, 2.0 * opt.line_threshold)
+    return is_periodic(line_parameter(pts1[fit.inliers], c), length, PERIODIC_TOLERANCE)
 
 
 def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
@@ -701,8 +722,7 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
     inl = d.distances(check.F) < threshold
     far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
     shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
-    if shifted is None and np.count_nonzero(inl & far) < 8:
-        # a copy F does not explain: F may still ignore the parallax
+    if shifted is None:  # a copy F does not explain: F may still ignore the parallax
         shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15)
     if shifted is None:
         return check

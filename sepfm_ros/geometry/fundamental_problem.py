@@ -334,6 +334,12 @@ class FundamentalProblem:
         self.scale.update(robust_scale(cost.min(), self.n, self.model_points))
         return cost, np.count_nonzero(d < self.scale.threshold, axis=1)
 
+    def inliers(self, model: np.ndarray) -> np.ndarray:
+        """(N,) bool: matches within the inlier threshold of ``model`` (3, 3) (lmeds: within
+        the current robust threshold)."""
+        thr = self.scale.threshold if self.scoring == "lmeds" else self.threshold
+        return self.data.distances(model) < thr
+
     def _recount(self, model: np.ndarray) -> int:
         """lmeds: matches of ``model`` (3, 3) within the current robust inlier threshold."""
         return int(np.count_nonzero(self.data.distances(model) < self.scale.threshold))

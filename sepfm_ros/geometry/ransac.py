@@ -104,12 +104,20 @@ class RaceOptions:
         drop_ratio: an arm whose best inlier count is below ``drop_ratio`` times the leader's...
         drop_alpha: ...after enough samples that a good arm would have found an all-inlier
             sample with probability ``1 - drop_alpha`` is dropped.
+        pool_rule: which arms' samples count toward the pooled F(k, r) stop besides the
+            leader's (the arm holding the best model): ``"support"``, arms whose best inlier
+            count is at least ``pool_ratio`` times the best model's; ``"model"``, arms whose
+            lowest-cost model has at least ``pool_ratio`` of the best model's inliers among its
+            own inliers (needs the problems' ``inliers``; else ``"support"``).
+        pool_ratio: the share of that rule.
     """
 
     add_after: tuple[int, ...] = (40,)
     add_growth: float = 2.0
     drop_ratio: float = 0.8
     drop_alpha: float = 0.1
+    pool_rule: str = "support"
+    pool_ratio: float = 0.8
 
 
 @dataclass
@@ -355,8 +363,9 @@ class _Arm:
     raw_count: int = 0
     checked: bool = False  #: its best model was locally optimised before a drop
     sampler: ProsacSampler | None = None  #: PROSAC state (None: uniform sampling)
-    top_model: Any = None  #: lowest-cost model of any kind (only for problems with ``recount``)
+    top_model: Any = None  #: lowest-cost model of any kind (minimal or refined)
     top_cost: float = np.inf
+    overlap: tuple[Any, Any, float] | None = None  #: (its model, best model, share) for "model"
 
 
 class _Run:
@@ -390,6 +399,7 @@ class _Run:
         self.best_cost = np.inf
         self.best_count = -1
         self.leader = -1
+        self._best_inliers: tuple[Any, np.ndarray] | None = None  # (best model, its inliers)
         self.extra_lo = 0
         self.hypotheses = 0
         self.total = 0
@@ -420,8 +430,10 @@ class _Run:
         recount = getattr(arm.problem, "recount", None)
         if recount is None:
             arm.best_count = max(arm.best_count, int(count.max()))
-        elif cost[i] < arm.top_cost:
-            arm.top_model, arm.top_cost, arm.best_count = models[i], float(cost[i]), int(count[i])
+        if cost[i] < arm.top_cost:
+            arm.top_model, arm.top_cost = models[i], float(cost[i])
+            if recount is not None:
+                arm.best_count = int(count[i])
         if cost[i] < self.best_cost:
             self.best_model, self.best_cost = models[i], float(cost[i])
             self.best_count, self.leader = int(count[i]), a
@@ -429,7 +441,7 @@ class _Run:
                 self.sprt.update(self.best_count, arm.problem.n)
             if recount is not None:  # counts are relative to the best model: re-count the others
                 for b, other in enumerate(self.arms):
-                    if b != a and other.top_model is not None:
+                    if b != a and other.top_model is not None and hasattr(other.problem, "recount"):
                         other.best_count = other.problem.recount(other.top_model)
         return i
 
@@ -443,11 +455,30 @@ class _Run:
         """Arm ``a`` holds the best model or its best support is near the best model's."""
         return a == self.leader or self.arms[a].best_count >= self.race.drop_ratio * self.best_count
 
+    def pools(self, a: int) -> bool:
+        """Arm ``a``'s samples count toward the stop (``race.pool_rule``, ``race.pool_ratio``)."""
+        arm = self.arms[a]
+        if a == self.leader:
+            return True
+        inliers = getattr(arm.problem, "inliers", None)
+        if self.race.pool_rule != "model" or inliers is None:
+            return arm.best_count >= self.race.pool_ratio * self.best_count
+        if arm.top_model is None:
+            return False
+        if self._best_inliers is None or self._best_inliers[0] is not self.best_model:
+            self._best_inliers = (self.best_model, inliers(self.best_model))
+        ov = arm.overlap
+        if ov is None or ov[0] is not arm.top_model or ov[1] is not self.best_model:
+            best = self._best_inliers[1]
+            share = np.count_nonzero(best & inliers(arm.top_model)) / max(1, np.count_nonzero(best))
+            arm.overlap = (arm.top_model, self.best_model, share)
+        return arm.overlap[2] >= self.race.pool_ratio
+
     def pooled_samples(self) -> int:
-        """Samples of the arms that agree with the best model (0 before there is one)."""
+        """Samples of the arms that pool with the best model (0 before there is one)."""
         if self.leader < 0:
             return 0
-        return sum(arm.samples for a, arm in enumerate(self.arms) if self.agrees(a))
+        return sum(arm.samples for a, arm in enumerate(self.arms) if self.pools(a))
 
     def needed(self, a: int) -> int:
         """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``."""
@@ -623,12 +654,13 @@ def run_ransac(
 
     Arm 0 starts; further arms are pulled from ``arms`` (lazily: an iterator may build each arm
     only when it joins) on the ``race`` schedule and are dropped when their support lags (see
-    :class:`RaceOptions`). The loop stops when the arms that agree with the best model have
+    :class:`RaceOptions`). The loop stops when the arms that pool with the best model have
     drawn F(k, r) samples together for the inlier ratio of the best model, or when
-    ``max_samples`` samples were drawn in all. An arm agrees when it holds the best model or its
-    own best support is at least ``race.drop_ratio`` of it: arms whose fixed points are all
-    inliers draw an all-inlier sample at the same rate w^k, so their samples pool (several good
-    line pairs racing would otherwise each draw F(k, r) samples); a lagging arm's do not count.
+    ``max_samples`` samples were drawn in all. An arm pools when it holds the best model or
+    passes ``race.pool_rule`` (by default: its own best support is at least ``race.pool_ratio``
+    of the best model's): arms whose fixed points are all inliers draw an all-inlier sample at
+    the same rate w^k, so their samples pool (several good line pairs racing would otherwise
+    each draw F(k, r) samples); a lagging arm's do not count.
 
     Args:
         arms: problems to sample (a list or a lazy iterator); all score against the same data.

@@ -38,6 +38,7 @@ from typing import Any
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
+from rclpy.signals import SignalHandlerOptions
 from rosbags.interfaces import Qos, QosDurability, QosHistory, QosReliability
 from tqdm import tqdm
 
@@ -439,7 +440,10 @@ def main(argv: list[str]) -> int:
     except BagError as err:
         print(f"sepfm_ros replay: error: {err}", file=sys.stderr)
         return 1
-    rclpy.init(args=["replay", *ros_argv])
+    # SIGINT is Python's KeyboardInterrupt here, not rclpy's handler: rclpy's shuts the context
+    # down at once, and a publish in flight then fails with "context is invalid" (a traceback)
+    # before the interrupt reaches the loop
+    rclpy.init(args=["replay", *ros_argv], signal_handler_options=SignalHandlerOptions.NO)
     previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
     node = rclpy.create_node("sepfm_replay")
     replayer = None

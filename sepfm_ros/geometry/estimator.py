@@ -723,7 +723,9 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
     far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
     shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
     if shifted is None:  # a copy F does not explain: F may still ignore the parallax
-        shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15)
+        shifted = shifted_plane_copy(
+            check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100
+        )
     if shifted is None:
         return check
     keep = ~shifted

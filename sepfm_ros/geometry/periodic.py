@@ -240,6 +240,7 @@ def shifted_plane_copy(
     min_self_share: float = 0.3,
     rel: float = 0.15,
     max_fit: int = 300,
+    max_iterations: int = 500,
 ) -> np.ndarray | None:
     """Matches that follow the plane H shifted by one period of a periodic texture on it.
 
@@ -263,6 +264,8 @@ def shifted_plane_copy(
             many as land that close to uniform random points of the plane's bounding box
             (chance: with a large ``tol`` every point of a dense plane is near another).
         max_fit: most candidates H2 is searched on (a random subset; it is scored on all).
+        max_iterations: cap on the RHO samples of the H2 search (F(4, 1 - min_share) at 0.995
+            below it).
     Returns:
         (N,) bool, the candidates on the shifted copy H2, or None when there is none.
     """
@@ -274,7 +277,7 @@ def shifted_plane_copy(
         idx = np.sort(rng.choice(idx, max_fit, replace=False))
     cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
     # F(4, 1 - min_share) samples find an H2 holding min_share of the candidates (p = 0.995)
-    iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=500)
+    iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=max_iterations)
     H2, _ = cv2.findHomography(pts1[idx], pts2[idx], cv2.RHO, tol, maxIters=iters, confidence=0.995)
     if H2 is None:
         return None

@@ -68,11 +68,14 @@ def gt_error(shared_data, values, F, cloud, img_a, img_b) -> float:
     return err
 
 
-def wait_health(client, predicate, timeout: float = 15.0) -> dict[str, str]:
-    """The first /diagnostics report of the client's node (from now on) that satisfies
-    ``predicate(values, level, message)``; fails with the last report after ``timeout``."""
+def wait_health(
+    client, predicate, timeout: float = 15.0, since: int | None = None
+) -> dict[str, str]:
+    """The first /diagnostics report of the client's node (from now on, or from report number
+    ``since``) that satisfies ``predicate(values, level, message)``; fails with the last report
+    after ``timeout``."""
     with client.lock:
-        start = len(client.health)
+        start = len(client.health) if since is None else since
     deadline = time.monotonic() + timeout
     last = None
     while time.monotonic() < deadline:
@@ -249,12 +252,16 @@ def test_lagging_right_camera_warns_with_offset_then_pairs_nearest(
     try:
         frames = {k: (images(a), images(b)) for k, (a, b) in enumerate(KITTI)}
         pace = paced(0.2)  # stamps 100 ms apart, sent at 5 Hz (a loaded 2-core machine)
+        with client.lock:
+            sending = len(client.health)  # the warning holds only while images arrive
         for k in range(15):
             next(pace)
             left, right = frames[k % len(KITTI)]
             stamp = T0 + k * period
             send_pair(client, image_msg(left, stamp), image_msg(right, stamp + lag))
-        report = wait_health(client, lambda v, lv, m: "no pair formed" in m, timeout=5.0)
+        report = wait_health(
+            client, lambda v, lv, m: "no pair formed" in m, timeout=5.0, since=sending
+        )
         assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
         assert "+12.0 ms" in report["_message"] and "sync_slop_s" in report["_message"]
         with client.lock:

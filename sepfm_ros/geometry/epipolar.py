@@ -43,17 +43,7 @@ def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
 @numba.njit(cache=True, nogil=True, fastmath=False)
 def _distance_one(f: np.ndarray, x: float, y: float, u: float, v: float) -> float:
     """Symmetric epipolar distance (px) of one correspondence (x, y) <-> (u, v) under F (3, 3)."""
-    a2 = f[0, 0] * x + f[0, 1] * y + f[0, 2]  # F x1: line in image 2
-    b2 = f[1, 0] * x + f[1, 1] * y + f[1, 2]
-    c2 = f[2, 0] * x + f[2, 1] * y + f[2, 2]
-    a1 = f[0, 0] * u + f[1, 0] * v + f[2, 0]  # F^T x2: line in image 1
-    b1 = f[0, 1] * u + f[1, 1] * v + f[2, 1]
-    n2 = a2 * a2 + b2 * b2
-    n1 = a1 * a1 + b1 * b1
-    if n2 <= 0.0 or n1 <= 0.0:
-        return np.inf
-    d = 0.5 * abs(a2 * u + b2 * v + c2) * (1.0 / np.sqrt(n2) + 1.0 / np.sqrt(n1))
-    return d if np.isfinite(d) else np.inf
+    return _distance_within(f, x, y, u, v, np.inf)
 
 
 #: Relative margin of :func:`_distance_within`'s cheap test (far above the rounding of d).

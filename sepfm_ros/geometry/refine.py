@@ -155,17 +155,10 @@ def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
     """Normalised eight-point least squares on rows idx (+ Sampson IRLS); F in px, unit norm.
 
     start: (9,) normalised model the first solve starts from (each IRLS solve starts from the
-    previous one), or (0,) for none (a full eigen-decomposition).
+    previous one); zeros for none (a full eigen-decomposition, see
+    :func:`smallest_eigenvector`).
     """
-    G = _gram(x1, x2, idx, np.ones(idx.shape[0]))
-    if start.shape[0] == 9:
-        F_n = _solve_gram(G, start)
-    else:
-        _, vecs = np.linalg.eigh(G)
-        F_n = np.empty((3, 3))
-        for i in range(9):
-            F_n[i // 3, i % 3] = vecs[i, 0]
-        F_n = rank2_unit_kernel(F_n)
+    F_n = _solve_gram(_gram(x1, x2, idx, np.ones(idx.shape[0])), start)
     for _ in range(irls_iterations):
         G = _gram(x1, x2, idx, _sampson_weights(F_n, x1, x2, idx))
         F_n = _solve_gram(G, F_n.ravel().copy())
@@ -219,7 +212,7 @@ def refit(data: Correspondences, inliers: np.ndarray, irls_iterations: int = 0) 
         (3, 3) rank-2 F in pixels, unit Frobenius norm.
     """
     idx = np.flatnonzero(inliers)
-    return _refit_kernel(data.x1, data.x2, idx, int(irls_iterations), data.T1, data.T2, np.zeros(0))
+    return _refit_kernel(data.x1, data.x2, idx, int(irls_iterations), data.T1, data.T2, np.zeros(9))
 
 
 def fit_least_squares(pts1: np.ndarray, pts2: np.ndarray, irls_iterations: int = 0) -> np.ndarray:

@@ -25,6 +25,13 @@ error over ``parallax_factor`` times the homography tolerance): matches just off
 (mislocalised or near-miss matches of a planar scene, or a purely rotating camera) agree with
 some member of the plane's family of F far more often than chance, and the estimator picks
 exactly that member.
+
+The plane-and-parallax candidates are tried unless F's off-plane support is well beyond the
+flagging bar (``accept_factor`` times it): the F that reaches the check was fitted to the
+matches (local optimisation moves its epipole to gather off-plane matches, two degrees of
+freedom), so its off-plane count carries a selection the shuffled count does not see. An F just
+over the bar may be a plane's F fitted to a few parallax matches, and a candidate through the
+plane and two of them shows whether the data hold a better one.
 """
 
 from __future__ import annotations
@@ -127,6 +134,7 @@ def plane_and_parallax(
     confidence: float = 0.99,
     batch: int = 16,
     plane_points: int = 150,
+    accept_factor: float = 2.0,
 ) -> PlaneCheck:
     """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
 
@@ -138,6 +146,8 @@ def plane_and_parallax(
         plane_share: a homography must explain this share of F's inliers to trigger the check.
         max_candidates: off-plane pairs tried (all pairs when there are fewer).
         min_excess: off-plane inliers needed beyond the chance count (see the module docstring).
+        accept_factor: F is kept without trying candidates when its off-plane excess over
+            chance is at least this times the bar of ``min_excess`` (see the module docstring).
         shuffles: random re-pairings averaged for the chance count.
         parallax_factor: a match counts as off the plane (evidence for F) when its transfer
             error exceeds this times the homography tolerance (2 x ``threshold``).
@@ -182,10 +192,10 @@ def plane_and_parallax(
     if len(off) < 2:
         out.reason = f"degenerate: dominant plane (all {len(pts1)} matches on one homography)"
         return out
-    # cheap test first: an F whose support off the plane is well above chance is determined by
+    # cheap test first: an F whose support off the plane is far above chance is determined by
     # the data; only an F without it is challenged by plane-and-parallax candidates
     out.off_plane_chance = chance_inliers(F, pts1[far], pts2[far], threshold, rng, shuffles)
-    if out.off_plane_inliers - out.off_plane_chance >= max(
+    if out.off_plane_inliers - out.off_plane_chance >= accept_factor * max(
         min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)
     ):
         return out

@@ -130,8 +130,9 @@ class EstimatorOptions:
         triple: ``"raw"`` sample points, ``"synthesized"`` from the refined H_e, or ``"all"``
             H_e inliers as the fixed line correspondences of stage 2.
         plane_check: DEGENSAC-style plane-and-parallax check of the final F (degeneracy.py).
-        lo: local optimisation inside RANSAC, ``"sampson"`` (Sampson-weighted refits from 3x the
-            threshold down) or ``"plain"`` (least squares at 2x and 1x); see
+        lo: local optimisation inside RANSAC, ``"lm"`` (Sampson-weighted refits from 3x the
+            threshold down, then Levenberg-Marquardt on the truncated geometric error),
+            ``"sampson"`` (the refits alone) or ``"plain"`` (least squares at 2x and 1x); see
             ``fundamental_problem.LO_SCHEMES``.
         prosac: PROSAC sampling (best matches first) in every RANSAC loop (ransac.py).
         sprt: SPRT early rejection of minimal-sample models (Matas & Chum) in every loop.
@@ -177,7 +178,7 @@ class EstimatorOptions:
     min_line_inliers: int = 4
     triple: str = "raw"
     plane_check: bool = True
-    lo: str = "sampson"
+    lo: str = "lm"
     prosac: bool = True
     sprt: bool = True
     bailout: bool = True

@@ -206,3 +206,26 @@ def test_fallback_prosac_reaches_the_whole_pool_within_the_budget_left(monkeypat
     result = problem.standard()
     assert seen["growth"] == 300
     assert budget.used <= 1000 and result.model is not None
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_nearest_within_equals_a_kd_tree(seed):
+    from scipy.spatial import cKDTree
+
+    from sepfm_ros.geometry.periodic import nearest_within
+
+    rng = np.random.default_rng(seed)
+    points = rng.uniform(0, 200, (300, 2))
+    points[:20] = points[20:40] + rng.normal(0, 0.5, (20, 2))  # close pairs
+    queries = np.concatenate(
+        [points + rng.normal(0, 2.0, points.shape), rng.uniform(-50, 250, (200, 2))]
+    )
+    queries[0] = [np.nan, 1.0]
+    queries[1] = [1e300, 1.0]
+    for radius in (0.5, 2.0, 7.0):
+        got = nearest_within(points, queries, radius)
+        want, _ = cKDTree(points).query(queries[2:], distance_upper_bound=radius)
+        want = np.where(want < radius, want, np.inf)
+        assert np.isinf(got[:2]).all()
+        assert np.allclose(got[2:], want, rtol=0, atol=1e-12) or np.array_equal(got[2:], want)
+        assert np.count_nonzero(np.isfinite(got)) > 0  # the test reaches the finite branch

@@ -30,7 +30,6 @@ import math
 import cv2
 import numba
 import numpy as np
-from scipy.spatial import cKDTree
 
 from sepfm_ros.geometry.degeneracy import transfer_error
 from sepfm_ros.geometry.ransac import ransac_trials
@@ -228,6 +227,53 @@ def is_periodic(
     return hits >= math.ceil(min_share * len(t))
 
 
+@numba.njit(cache=True, nogil=True)
+def nearest_within(points: np.ndarray, queries: np.ndarray, radius: float) -> np.ndarray:
+    """(M,) distance (px) from each of ``queries`` (M, 2) to its nearest of ``points`` (N, 2)
+    when it is below ``radius``, else inf (a grid of ``radius`` cells, sorted by cell, searched in
+    the 3 x 3 cells around each query)."""
+    n, m = points.shape[0], queries.shape[0]
+    out = np.full(m, np.inf)
+    if n == 0 or m == 0 or not radius > 0.0:
+        return out
+    x0 = points[:, 0].min()
+    y0 = points[:, 1].min()
+    rows = np.int64((points[:, 1].max() - y0) / radius) + 3
+    cols = np.int64((points[:, 0].max() - x0) / radius) + 3
+    keys = np.empty(n, dtype=np.int64)
+    for i in range(n):
+        cx = np.int64((points[i, 0] - x0) / radius) + 1
+        cy = np.int64((points[i, 1] - y0) / radius) + 1
+        keys[i] = cx * rows + cy
+    order = np.argsort(keys)
+    sorted_keys = keys[order]
+    r2 = radius * radius
+    for j in range(m):
+        qx, qy = queries[j, 0], queries[j, 1]
+        fx, fy = (qx - x0) / radius, (qy - y0) / radius
+        if not (-2.0 < fx < cols and -2.0 < fy < rows):  # no point within radius (or NaN)
+            continue
+        cx = np.int64(np.floor(fx)) + 1
+        cy = np.int64(np.floor(fy)) + 1
+        best = r2
+        for dx in range(-1, 2):
+            for dy in range(-1, 2):
+                if cy + dy < 0 or cy + dy >= rows:
+                    continue
+                key = (cx + dx) * rows + cy + dy
+                k = np.searchsorted(sorted_keys, key)
+                while k < n and sorted_keys[k] == key:
+                    i = order[k]
+                    ex, ey = points[i, 0] - qx, points[i, 1] - qy
+                    d2 = ex * ex + ey * ey
+                    if d2 < best:
+                        best = d2
+                    k += 1
+        if best < r2:
+            out[j] = np.sqrt(best)
+    return out
+
+
 def shifted_plane_copy(
     H: np.ndarray,
     pts1: np.ndarray,
@@ -298,12 +344,11 @@ def shifted_plane_copy(
     finite = np.isfinite(y).all(axis=1)
     shift = np.linalg.norm(y[finite] - plane[finite], axis=1)
     radius = np.minimum(tol, rel * shift)  # px, relative to the shift as in the 1D test
-    tree = cKDTree(plane)
-    near, _ = tree.query(y[finite], distance_upper_bound=tol)
+    near = nearest_within(plane, np.ascontiguousarray(y[finite]), float(tol))
     hits = np.count_nonzero((shift > tol) & (near < radius))
     # chance: the same radii around uniform points in the plane's bounding box
     probe = rng.uniform(plane.min(axis=0), plane.max(axis=0), (len(radius), 2))
-    near_probe, _ = tree.query(probe, distance_upper_bound=tol)
+    near_probe = nearest_within(plane, probe, float(tol))
     chance = np.count_nonzero(near_probe < radius)
     if hits < max(min_self_share * len(plane), 3.0 * chance):
         return None

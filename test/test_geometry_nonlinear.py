@@ -93,6 +93,9 @@ def test_degenerate_start_comes_back_unchanged_and_finite():
     data = Correspondences.from_pixels(pair.pts1, pair.pts2)
     G = refine_truncated(np.zeros((3, 3)), data, 1.0)
     assert np.array_equal(G, np.zeros((3, 3)))
+    bad = pair.F.copy()
+    bad[0, 0] = np.nan
+    assert np.array_equal(refine_truncated(bad, data, 1.0), bad, equal_nan=True)
 
 
 @pytest.mark.parametrize("lo", ["lm", "sampson", "plain"])

@@ -36,6 +36,9 @@ LM_REACH = 3.0
 #: the matches within ``LM_BAND`` x threshold of the model, clamped to [1, ``LM_BAND``] x threshold.
 LM_NOISE_FACTOR = 7.0
 LM_BAND = 3.0
+#: floating-point liberties of the LM kernel: reordered sums and fused multiply-adds (about a third
+#: faster); infinities and NaN keep their meaning (an undefined epipolar line is an inf residual)
+_FAST = {"reassoc", "contract", "arcp", "nsz"}
 
 
 @numba.njit(cache=True, nogil=True)
@@ -62,8 +65,8 @@ def _compose(U: np.ndarray, sigma: float, V: np.ndarray) -> np.ndarray:
 
 @numba.njit(cache=True, nogil=True)
 def _residual(F, x, y, u, v, s1, s2):
-    """(e px, r, l2 (2,), l1 (2,), 1/|l1|, 1/|l2|) of one normalised match; e = 0 when a line is
-    undefined (the match then carries no weight)."""
+    """(e px, r, l2 (2,), l1 (2,), 1/(s1 |l1|), 1/(s2 |l2|)) of one normalised match; e = inf
+    when an epipolar line is undefined (the match is then beyond any truncation)."""
     l20 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
     l21 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
     l22 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
@@ -108,7 +111,7 @@ def _parameter_derivatives(U: np.ndarray, sigma: float, V: np.ndarray) -> np.nda
     return D
 
 
-@numba.njit(cache=True, nogil=True)
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
 def refine_truncated_kernel(
     F: np.ndarray,
     x1: np.ndarray,
@@ -119,6 +122,8 @@ def refine_truncated_kernel(
     iterations: int,
 ) -> np.ndarray:
     """See :func:`refine_truncated`; F and the result in px, x1, x2 normalised by T1, T2."""
+    if not np.isfinite(F).all():
+        return F.copy()
     s1, s2 = T1[0, 0], T2[0, 0]
     t2 = truncation * truncation
     F_n = np.linalg.inv(T2).T @ F @ np.linalg.inv(T1)
@@ -151,6 +156,7 @@ def refine_truncated_kernel(
     cost = _cost(G, x1, x2, s1, s2, t2) + held
     lam = 1e-3
     g = np.empty(9)
+    small = False
     for _ in range(iterations):
         # J_i = D g_i (D: dF/d(parameters), g_i = de_i/dF), so J^T J = D (sum g g^T) D^T
         D = _parameter_derivatives(U, sigma, V).reshape(7, 9)

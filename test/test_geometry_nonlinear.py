@@ -10,6 +10,7 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import msac_kernel, symmetric_epipolar_distance
 from sepfm_ros.geometry.nonlinear import (
     LM_BAND,
+    LM_MODEL_START,
     noise_truncation,
     polish_local_optimization,
     refine_truncated,
@@ -82,7 +83,7 @@ def test_polish_returns_both_starts_refined():
     model = _perturbed(pair.F, rng, 0.01)
     refits = np.stack([_perturbed(pair.F, rng, 0.003), _perturbed(pair.F, rng, 0.002)])
     out = polish_local_optimization(model, refits, data, 1.0)
-    assert out.shape == (2, 3, 3) and np.isfinite(out).all()
+    assert out.shape == (2, 3, 3) and np.isfinite(out).all()  # noisy: both starts
     t = noise_truncation(refits[1], data, 1.0)
     assert _cost(out[1], data, t) < _cost(model, data, t)
     assert _cost(out[0], data, t) <= min(_cost(r, data, t) for r in refits) + 1e-6
@@ -105,3 +106,18 @@ def test_every_lo_scheme_recovers_a_synthetic_F(lo):
     assert est.status == "ok"
     d = symmetric_epipolar_distance(est.F, pair.pts1, pair.pts2)[pair.is_inlier]
     assert np.median(d) < 0.6
+
+
+def test_polish_keeps_to_the_best_refit_on_precise_matches():
+    """Precise matches (truncation under LM_MODEL_START x threshold): the sample's own model is
+    not refined, only the best refit."""
+    pair = make_pair(n_inliers=150, n_outliers=50, noise=0.05, seed=2)
+    data = Correspondences.from_pixels(pair.pts1, pair.pts2)
+    rng = np.random.default_rng(0)
+    model = _perturbed(pair.F, rng, 0.01)
+    refits = np.stack([_perturbed(pair.F, rng, 0.0002), pair.F / np.linalg.norm(pair.F)])
+    assert noise_truncation(refits[1], data, 1.0) < LM_MODEL_START
+    out = polish_local_optimization(model, refits, data, 1.0)
+    assert out.shape == (1, 3, 3)
+    t = noise_truncation(refits[1], data, 1.0)
+    assert _cost(out[0], data, t) <= min(_cost(r, data, t) for r in refits) + 1e-9

@@ -36,6 +36,9 @@ LM_REACH = 3.0
 #: the matches within ``LM_BAND`` x threshold of the model, clamped to [1, ``LM_BAND``] x threshold.
 LM_NOISE_FACTOR = 7.0
 LM_BAND = 3.0
+#: :func:`polish_local_optimization` refines the sample's own model too when the truncation is
+#: at least this times the threshold (noisy matches; on precise ones it adds nothing).
+LM_MODEL_START = 1.5
 #: floating-point liberties of the LM kernel: reordered sums and fused multiply-adds (about a third
 #: faster); infinities and NaN keep their meaning (an undefined epipolar line is an inf residual)
 _FAST = {"reassoc", "contract", "arcp", "nsz"}
@@ -263,7 +266,7 @@ def noise_truncation(F: np.ndarray, data: Correspondences, threshold: float) -> 
 
 
 @numba.njit(cache=True, nogil=True)
-def _polish_kernel(model, refits, X1, X2, x1, x2, T1, T2, threshold, iterations):
+def _polish_kernel(model, refits, X1, X2, x1, x2, T1, T2, threshold, iterations, model_start):
     """See :func:`polish_local_optimization`."""
     K = refits.shape[0]
     cand = np.empty((K + 1, 3, 3))
@@ -272,6 +275,10 @@ def _polish_kernel(model, refits, X1, X2, x1, x2, T1, T2, threshold, iterations)
     cost, _ = msac_kernel(cand, X1, X2, threshold)
     best = cand[np.argmin(cost)].copy()
     t = _noise_truncation_kernel(best, X1, X2, threshold)
+    if t < model_start * threshold:
+        out = np.empty((1, 3, 3))
+        out[0] = refine_truncated_kernel(best, x1, x2, T1, T2, t, iterations)
+        return out
     out = np.empty((2, 3, 3))
     out[0] = refine_truncated_kernel(best, x1, x2, T1, T2, t, iterations)
     out[1] = refine_truncated_kernel(model, x1, x2, T1, T2, t, iterations)
@@ -287,20 +294,22 @@ def polish_local_optimization(
 ) -> np.ndarray:
     """The Levenberg-Marquardt step of local optimisation (the ``"lm"`` scheme).
 
-    Both the best of ``model`` and its ``refits`` (by MSAC cost at ``threshold``) and the sample's
-    own ``model`` are refined by :func:`refine_truncated` at the :func:`noise_truncation` of the
-    best. The two starts end in different minima where the refits settled at the threshold: from
-    the refits the fit keeps what they found on precise matches, from the sample's model it
-    finds the basin a wider truncation prefers on noisy ones. The caller scores both.
+    The best of ``model`` and its ``refits`` (by MSAC cost at ``threshold``) is refined by
+    :func:`refine_truncated` at the :func:`noise_truncation` of the best; when that truncation
+    is at least ``LM_MODEL_START`` x ``threshold`` (noisy matches), the sample's own ``model`` is
+    refined too. The two starts end in different minima: from the refits the fit keeps what they
+    found, from the sample's model it finds the basin a wider truncation prefers on noisy
+    matches, where the refits settled at the threshold. The caller scores the results.
 
     Args:
         model: (3, 3) the sample's model, px. refits: (K, 3, 3) its least-squares refits, px.
         data: all matches. threshold: px, the inlier threshold.
     Returns:
-        (2, 3, 3) rank-2 models in px: refined from the best, refined from ``model``.
+        (K, 3, 3) rank-2 models in px, K = 1 or 2: refined from the best, then from ``model``.
     """
     return _polish_kernel(
         np.ascontiguousarray(model, dtype=np.float64),
         np.ascontiguousarray(refits, dtype=np.float64).reshape(-1, 3, 3),
         data.X1, data.X2, data.x1, data.x2, data.T1, data.T2, float(threshold), int(iterations),
+        LM_MODEL_START,
     )  # fmt: skip

@@ -188,8 +188,9 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
 #: :func:`~sepfm_ros.geometry.nonlinear.polish_local_optimization`. ``"sampson"``: each refit is
 #: Sampson-weighted, from 3x the threshold down (on forward motion, where points near the epipole
 #: fit many wrong F, plain least squares stops in a wrong basin); ``"lm"``: the same refits, then
-#: the truncated geometric error minimised from the best refit and from the sample's model at a
-#: truncation that follows the matches' noise (a linear refit minimises an algebraic error);
+#: the truncated geometric error minimised from the best refit (and, on noisy matches, from the
+#: sample's model) at a truncation that follows the matches' noise (a linear refit minimises an
+#: algebraic error);
 #: ``"plain"``: unweighted least squares at 2x and 1x the threshold.
 LO_SCHEMES: dict[str, tuple[tuple[float, ...], int, bool]] = {
     "lm": ((3.0, 2.0, 1.5, 1.0), 2, True),

@@ -128,6 +128,22 @@ def test_plane_check_keeps_general_scenes():
         assert not check.replaced and check.reason is None
 
 
+def test_plane_check_accepts_without_candidates_only_an_f_with_ample_off_plane_support():
+    """``accepted`` (F kept untried: its off-plane excess is at least ``accept_factor`` times the
+    flagging bar) holds for the true F with 60 off-plane matches, not with 10, and an accepted
+    F tried no plane-and-parallax candidates; the estimator then skips its wider search for a
+    shifted plane copy."""
+    for n_off, expected in ((60, True), (10, False)):
+        pts1, pts2, _, _, F_gt = planar_majority_pair(n_off=n_off, n_out=40, seed=2)
+        check = plane_and_parallax(F_gt, pts1, pts2, 1.0, np.random.default_rng(0))
+        assert check.planar
+        assert check.accepted is expected, (n_off, check)
+        if expected:
+            assert check.candidates == 0 and not check.replaced and check.reason is None
+        else:
+            assert check.candidates > 0
+
+
 @pytest.mark.parametrize("method", ["sep5", "ransac7"])
 def test_matches_along_one_line_are_flagged(method):
     # ORB matches of a 3 px high textured row and the same row 6 px to the right (the live

@@ -63,6 +63,8 @@ class PlaneCheck:
         off_plane_chance: off-plane inliers expected by chance (shuffled pairs), mean.
         reason: why F is not supported off the plane ("degenerate: ..."), or None.
         H: the homography of the plane that was tested, or None.
+        accepted: F was kept without trying candidates: its support off the plane is at least
+            ``accept_factor`` times the flagging bar above chance.
     """
 
     F: np.ndarray
@@ -74,6 +76,7 @@ class PlaneCheck:
     off_plane_chance: float = 0.0
     reason: str | None = None
     H: np.ndarray | None = None  #: (3, 3) the plane's homography (image 1 -> 2) when found
+    accepted: bool = False
 
 
 def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
@@ -198,6 +201,7 @@ def plane_and_parallax(
     if out.off_plane_inliers - out.off_plane_chance >= accept_factor * max(
         min_excess, 3.0 * np.sqrt(out.off_plane_chance + 1.0)
     ):
+        out.accepted = True
         return out
     n_pairs = len(off) * (len(off) - 1) // 2
     if n_pairs <= max_candidates:

@@ -723,7 +723,9 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
     inl = d.distances(check.F) < threshold
     far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
     shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
-    if shifted is None:  # a copy F does not explain: F may still ignore the parallax
+    if shifted is None and not check.accepted:
+        # a copy F does not explain: F may still ignore the parallax (unless its support off
+        # the plane is far above chance, when the plane check kept it without a challenge)
         shifted = shifted_plane_copy(
             check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100
         )

@@ -373,16 +373,20 @@ class FundamentalProblem:
         )  # fmt: skip
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
-        """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit), then
-        with the ``"lm"`` scheme their Levenberg-Marquardt polish (polish_local_optimization);
+        """Iterative least-squares refits of ``model`` on its inliers (see iterative_refit);
         lmeds: refits on its robust inliers (see lmeds_refit), judged by the caller by their
         median."""
         if self.scoring == "lmeds":
             return lmeds_refit(model, self.data, self.model_points, irls_iterations=0)
-        refits = iterative_refit(
+        return iterative_refit(
             model, self.data, self.threshold, factors=self.lo_factors,
             irls_iterations=self.lo_irls,
         )  # fmt: skip
-        if not self.lo_lm:
-            return refits
-        return polish_local_optimization(model, refits, self.data, self.threshold)
+
+    def polish(self, model: np.ndarray, start: np.ndarray) -> np.ndarray:
+        """The ``"lm"`` scheme's Levenberg-Marquardt step (polish_local_optimization) from
+        ``start`` (3, 3), the best of the sample's ``model`` and its refits: (K, 3, 3) models,
+        K = 0 for the other schemes and for lmeds."""
+        if not self.lo_lm or self.scoring == "lmeds":
+            return np.empty((0, 3, 3))
+        return polish_local_optimization(model, start, self.data, self.threshold)

@@ -25,7 +25,6 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
     distances_within_kernel,
-    msac_kernel,
 )
 
 #: Levenberg-Marquardt iterations of :func:`refine_truncated` at most.
@@ -158,13 +157,14 @@ def refine_truncated_kernel(
     held = (N - n) * t2
     cost = _cost(G, x1, x2, s1, s2, t2) + held
     lam = 1e-3
-    g = np.empty(9)
+    Gm = np.empty((n, 9))  # rows g_i of the matches within the truncation
+    ev = np.empty(n)
     small = False
     for _ in range(iterations):
-        # J_i = D g_i (D: dF/d(parameters), g_i = de_i/dF), so J^T J = D (sum g g^T) D^T
+        # J_i = D g_i (D: dF/d(parameters), g_i = de_i/dF), so J^T J = D (G^T G) D^T with the
+        # rows g_i of the matches inside the truncation in G (one BLAS product per iteration)
         D = _parameter_derivatives(U, sigma, V).reshape(7, 9)
-        M = np.zeros((9, 9))
-        b = np.zeros(9)
+        m = 0
         for i in range(n):
             x, y, u, v = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1]
             e, r, l20, l21, l10, l11, i1, i2 = _residual(G, x, y, u, v, s1, s2)
@@ -176,17 +176,15 @@ def refine_truncated_kernel(
             k1 = 0.5 * r * i1 * i1 * i1 * s1 * s1
             k2 = 0.5 * r * i2 * i2 * i2 * s2 * s2
             m0, m1, m2 = c * x - k1 * l10, c * y - k1 * l11, c  # c x1_b - k1 l1_b
-            g[0], g[1], g[2] = u * m0 - k2 * l20 * x, u * m1 - k2 * l20 * y, u * m2 - k2 * l20
-            g[3], g[4], g[5] = v * m0 - k2 * l21 * x, v * m1 - k2 * l21 * y, v * m2 - k2 * l21
-            g[6], g[7], g[8] = m0, m1, m2
-            for p in range(9):
-                gp = g[p]
-                b[p] += gp * e
-                for q in range(p + 1):
-                    M[p, q] += gp * g[q]
-        for p in range(9):
-            for q in range(p):
-                M[q, p] = M[p, q]
+            a0, a1 = k2 * l20, k2 * l21
+            Gm[m, 0], Gm[m, 1], Gm[m, 2] = u * m0 - a0 * x, u * m1 - a0 * y, u * m2 - a0
+            Gm[m, 3], Gm[m, 4], Gm[m, 5] = v * m0 - a1 * x, v * m1 - a1 * y, v * m2 - a1
+            Gm[m, 6], Gm[m, 7], Gm[m, 8] = m0, m1, m2
+            ev[m] = e
+            m += 1
+        Gs = Gm[:m]
+        M = Gs.T @ Gs
+        b = Gs.T @ ev[:m]
         JtJ = D @ M @ D.T
         Jte = D @ b
         if np.abs(Jte).max() < 1e-12 * max(1.0, cost):
@@ -266,50 +264,45 @@ def noise_truncation(F: np.ndarray, data: Correspondences, threshold: float) -> 
 
 
 @numba.njit(cache=True, nogil=True)
-def _polish_kernel(model, refits, X1, X2, x1, x2, T1, T2, threshold, iterations, model_start):
+def _polish_kernel(model, start, x1, x2, X1, X2, T1, T2, threshold, iterations, model_start):
     """See :func:`polish_local_optimization`."""
-    K = refits.shape[0]
-    cand = np.empty((K + 1, 3, 3))
-    cand[0] = model
-    cand[1:] = refits
-    cost, _ = msac_kernel(cand, X1, X2, threshold)
-    best = cand[np.argmin(cost)].copy()
-    t = _noise_truncation_kernel(best, X1, X2, threshold)
+    t = _noise_truncation_kernel(start, X1, X2, threshold)
     if t < model_start * threshold:
         out = np.empty((1, 3, 3))
-        out[0] = refine_truncated_kernel(best, x1, x2, T1, T2, t, iterations)
+        out[0] = refine_truncated_kernel(start, x1, x2, T1, T2, t, iterations)
         return out
     out = np.empty((2, 3, 3))
-    out[0] = refine_truncated_kernel(best, x1, x2, T1, T2, t, iterations)
+    out[0] = refine_truncated_kernel(start, x1, x2, T1, T2, t, iterations)
     out[1] = refine_truncated_kernel(model, x1, x2, T1, T2, t, iterations)
     return out
 
 
 def polish_local_optimization(
     model: np.ndarray,
-    refits: np.ndarray,
+    start: np.ndarray,
     data: Correspondences,
     threshold: float,
     iterations: int = LM_ITERATIONS,
 ) -> np.ndarray:
     """The Levenberg-Marquardt step of local optimisation (the ``"lm"`` scheme).
 
-    The best of ``model`` and its ``refits`` (by MSAC cost at ``threshold``) is refined by
-    :func:`refine_truncated` at the :func:`noise_truncation` of the best; when that truncation
-    is at least ``LM_MODEL_START`` x ``threshold`` (noisy matches), the sample's own ``model`` is
-    refined too. The two starts end in different minima: from the refits the fit keeps what they
-    found, from the sample's model it finds the basin a wider truncation prefers on noisy
-    matches, where the refits settled at the threshold. The caller scores the results.
+    ``start`` (the best of the sample's ``model`` and its least-squares refits, by MSAC cost at
+    ``threshold``) is refined by :func:`refine_truncated` at the :func:`noise_truncation` of
+    ``start``; when that truncation is at least ``LM_MODEL_START`` x ``threshold`` (noisy
+    matches), the sample's own ``model`` is refined too. The two starts end in different minima:
+    from the refits the fit keeps what they found, from the sample's model it finds the basin a
+    wider truncation prefers on noisy matches, where the refits settled at the threshold. The
+    caller scores the results.
 
     Args:
-        model: (3, 3) the sample's model, px. refits: (K, 3, 3) its least-squares refits, px.
+        model: (3, 3) the sample's model, px. start: (3, 3) the best of it and its refits, px.
         data: all matches. threshold: px, the inlier threshold.
     Returns:
-        (K, 3, 3) rank-2 models in px, K = 1 or 2: refined from the best, then from ``model``.
+        (K, 3, 3) rank-2 models in px, K = 1 or 2: refined from ``start``, then from ``model``.
     """
     return _polish_kernel(
         np.ascontiguousarray(model, dtype=np.float64),
-        np.ascontiguousarray(refits, dtype=np.float64).reshape(-1, 3, 3),
-        data.X1, data.X2, data.x1, data.x2, data.T1, data.T2, float(threshold), int(iterations),
+        np.ascontiguousarray(start, dtype=np.float64),
+        data.x1, data.x2, data.X1, data.X2, data.T1, data.T2, float(threshold), int(iterations),
         LM_MODEL_START,
     )  # fmt: skip

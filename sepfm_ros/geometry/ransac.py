@@ -88,6 +88,9 @@ class Problem(Protocol):
     def local_optimize(self, model: np.ndarray) -> np.ndarray:
         """Models (J, ...) refined from ``model`` and its inliers (J may be 0)."""
 
+    # Optional: ``polish(model, start) -> models (J, ...)``, a second local-optimisation step from
+    # ``start``, the best of ``model`` and its ``local_optimize`` results; when it returns
+    # models they are offered instead of those results.
     # Optional: ``recount(model) -> int``, for problems whose inlier counts depend on the best
     # model so far (LMedS: matches within its robust scale). With it an arm's support is the
     # count of its lowest-cost model, re-counted whenever the best model improves, instead of
@@ -445,11 +448,29 @@ class _Run:
                         other.best_count = other.problem.recount(other.top_model)
         return i
 
-    def local_optimization(self, a: int, model: Any) -> None:
-        """LO-RANSAC step from ``model`` of arm ``a``."""
-        lo = self.arms[a].problem.local_optimize(model)
+    def local_optimization(self, a: int, model: Any, cost: float) -> None:
+        """LO-RANSAC step from ``model`` (cost ``cost``) of arm ``a``: its refits are scored, and
+        for problems with a ``polish`` step that returns models (the ``"lm"`` scheme), the
+        polish of the best of ``model`` and its refits is offered in their place (the refits'
+        scores only choose its start)."""
+        problem = self.arms[a].problem
+        lo = problem.local_optimize(model)
+        polish = getattr(problem, "polish", None)
+        if polish is None:
+            if len(lo):
+                self.offer(a, lo, *problem.score(lo))
+            return
+        start, start_cost, scored = model, cost, None
         if len(lo):
-            self.offer(a, lo, *self.arms[a].problem.score(lo))
+            scored = problem.score(lo)
+            i = int(np.argmin(scored[0]))
+            if scored[0][i] < start_cost:
+                start, start_cost = lo[i], float(scored[0][i])
+        refined = polish(model, start)
+        if len(refined):
+            self.offer(a, refined, *problem.score(refined))
+        elif scored is not None:
+            self.offer(a, lo, *scored)
 
     def agrees(self, a: int) -> bool:
         """Arm ``a`` holds the best model or its best support is near the best model's."""
@@ -547,10 +568,10 @@ class _Run:
         if cost[i] < arm.cost:
             arm.model, arm.cost = models[i], float(cost[i])
             arm.raw_count = int(count[i])
-            self.local_optimization(a, models[i])
+            self.local_optimization(a, models[i], float(cost[i]))
         elif self.extra_lo < self.max_extra_lo and count[i] >= self.extra_lo_ratio * arm.raw_count:
             self.extra_lo += 1
-            self.local_optimization(a, models[i])
+            self.local_optimization(a, models[i], float(cost[i]))
 
     def score_minimal(self, a: int, models: Any) -> tuple[np.ndarray, np.ndarray]:
         """Score minimal-sample models of arm ``a``: fully, or with SPRT / bail-out when on and
@@ -591,7 +612,7 @@ class _Run:
                 continue
             if not arm.checked and arm.model is not None:
                 arm.checked = True
-                self.local_optimization(a, arm.model)
+                self.local_optimization(a, arm.model, arm.cost)
                 if self.agrees(a):
                     continue
             self.active.remove(a)

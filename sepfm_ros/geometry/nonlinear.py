@@ -267,13 +267,11 @@ def noise_truncation(F: np.ndarray, data: Correspondences, threshold: float) -> 
 def _polish_kernel(model, start, x1, x2, X1, X2, T1, T2, threshold, iterations, model_start):
     """See :func:`polish_local_optimization`."""
     t = _noise_truncation_kernel(start, X1, X2, threshold)
-    if t < model_start * threshold:
-        out = np.empty((1, 3, 3))
-        out[0] = refine_truncated_kernel(start, x1, x2, T1, T2, t, iterations)
-        return out
-    out = np.empty((2, 3, 3))
+    both = t >= model_start * threshold  # noisy matches: the sample's model is refined too
+    out = np.empty((2 if both else 1, 3, 3))
     out[0] = refine_truncated_kernel(start, x1, x2, T1, T2, t, iterations)
-    out[1] = refine_truncated_kernel(model, x1, x2, T1, T2, t, iterations)
+    if both:
+        out[1] = refine_truncated_kernel(model, x1, x2, T1, T2, t, iterations)
     return out
 
 

@@ -455,21 +455,17 @@ class _Run:
         scores only choose its start)."""
         problem = self.arms[a].problem
         lo = problem.local_optimize(model)
+        scored = problem.score(lo) if len(lo) else None
         polish = getattr(problem, "polish", None)
-        if polish is None:
-            if len(lo):
-                self.offer(a, lo, *problem.score(lo))
-            return
-        start, start_cost, scored = model, cost, None
-        if len(lo):
-            scored = problem.score(lo)
-            i = int(np.argmin(scored[0]))
-            if scored[0][i] < start_cost:
-                start, start_cost = lo[i], float(scored[0][i])
-        refined = polish(model, start)
-        if len(refined):
-            self.offer(a, refined, *problem.score(refined))
-        elif scored is not None:
+        if polish is not None:
+            start = model
+            if scored is not None and scored[0].min() < cost:
+                start = lo[int(np.argmin(scored[0]))]
+            refined = polish(model, start)
+            if len(refined):
+                self.offer(a, refined, *problem.score(refined))
+                return
+        if scored is not None:
             self.offer(a, lo, *scored)
 
     def agrees(self, a: int) -> bool:

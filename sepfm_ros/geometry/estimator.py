@@ -68,6 +68,7 @@ from sepfm_ros.geometry.line_pairs import (
     line_parameter,
     working_scale,
 )
+from sepfm_ros.geometry.nonlinear import polish_final
 from sepfm_ros.geometry.periodic import is_periodic, shifted_plane_copy
 from sepfm_ros.geometry.ransac import (
     Budget,
@@ -159,6 +160,10 @@ class EstimatorOptions:
         shifted_plane_check: the final plane check discounts matches on a period-shifted copy
             of the plane (``periodic.shifted_plane_copy``; a chessboard matched one square off)
             and then challenges F with plane-and-parallax candidates.
+        final_polish: with ``lo="lm"``, the final model of noisy matches (noise truncation at
+            least 1.5x the threshold: ORB, video frames) is refined once more by
+            Levenberg-Marquardt at a truncation of 2.5x the threshold
+            (``nonlinear.polish_final``); precise matches (SIFT at full resolution) keep it.
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -187,6 +192,7 @@ class EstimatorOptions:
     sample_plane_factor: float = 2.0
     periodic_check: bool = False
     shifted_plane_check: bool = True
+    final_polish: bool = True
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 
@@ -687,6 +693,11 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     check = _plane_check(problem, est, F)
     if check is not None:
         F, plane = check.F, check.reason
+    if problem.opt.final_polish and problem.opt.lo == "lm" and plane is None:
+        off_plane = None
+        if check is not None and check.H is not None:
+            off_plane = transfer_error(check.H, d.pts1, d.pts2) >= 2.0 * threshold
+        F = normalize_fundamental(polish_final(F, d, threshold, off_plane))
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
     est.inliers = d.distances(F) < threshold

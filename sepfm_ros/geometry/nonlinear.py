@@ -38,6 +38,10 @@ LM_BAND = 3.0
 #: :func:`polish_local_optimization` refines the sample's own model too when the truncation is
 #: at least this times the threshold (noisy matches; on precise ones it adds nothing).
 LM_MODEL_START = 1.5
+#: :func:`polish_final`: the final model of noisy matches is refined at this truncation, times the
+#: threshold (wider than the noise truncation on forward motion, where a fit truncated nearer the
+#: threshold keeps the bias of the matches it leaves out; docs/design.md)
+FINAL_TRUNCATION = 2.5
 #: floating-point liberties of the LM kernel: reordered sums and fused multiply-adds (about a third
 #: faster); infinities and NaN keep their meaning (an undefined epipolar line is an inf residual)
 _FAST = {"reassoc", "contract", "arcp", "nsz"}
@@ -304,3 +308,36 @@ def polish_local_optimization(
         data.x1, data.x2, data.X1, data.X2, data.T1, data.T2, float(threshold), int(iterations),
         LM_MODEL_START,
     )  # fmt: skip
+
+
+def polish_final(
+    F: np.ndarray, data: Correspondences, threshold: float, off_plane: np.ndarray | None = None
+) -> np.ndarray:
+    """The final model's Levenberg-Marquardt step (the ``"lm"`` scheme's last refinement).
+
+    On noisy matches (:func:`noise_truncation` of F at least ``LM_MODEL_START`` x ``threshold``,
+    as for the second start of :func:`polish_local_optimization`) F is refined by
+    :func:`refine_truncated` at ``FINAL_TRUNCATION`` x ``threshold``, and the refined model
+    replaces F if it keeps at least as many matches within ``threshold``, and as many of the
+    ``off_plane`` ones (a fit that follows wrong matches lying within the wider truncation, e.g.
+    a repetitive row matched one period off, loses true ones at the threshold; one that trades
+    parallax for a dominant plane's matches heads for a plane-degenerate F); on precise
+    matches F is returned as it is.
+
+    Args:
+        F: (3, 3) the final model, px. data: all matches. threshold: px, the inlier threshold.
+        off_plane: (N,) bool, the matches off a dominant plane (the plane check's), or None.
+    Returns:
+        (3, 3) F in px: refined (rank 2, unit norm) or ``F`` itself.
+    """
+    if noise_truncation(F, data, threshold) < LM_MODEL_START * threshold:
+        return F
+    G = refine_truncated(F, data, FINAL_TRUNCATION * threshold)
+    d = data.distances(np.ascontiguousarray(np.stack([F, G]))) < threshold
+    if np.count_nonzero(d[1]) < np.count_nonzero(d[0]):
+        return F
+    if off_plane is not None and np.count_nonzero(d[1] & off_plane) < np.count_nonzero(
+        d[0] & off_plane
+    ):
+        return F
+    return G

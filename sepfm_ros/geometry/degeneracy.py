@@ -48,6 +48,9 @@ from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
 from sepfm_ros.geometry.ransac import ransac_trials, trials_needed
 from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
 
+#: A match lies on the plane's homography when its transfer error is below this x the threshold.
+PLANE_TOLERANCE = 2.0
+
 
 @dataclass
 class PlaneCheck:
@@ -164,7 +167,7 @@ def plane_and_parallax(
         A :class:`PlaneCheck`.
     """
     F = normalize_fundamental(F)
-    tol = 2.0 * threshold
+    tol = PLANE_TOLERANCE * threshold
     inl = _sed(F, pts1, pts2) < threshold
     out = PlaneCheck(F)
     if np.count_nonzero(inl) < 8:

@@ -51,7 +51,12 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.degeneracy import PlaneCheck, plane_and_parallax, transfer_error
+from sepfm_ros.geometry.degeneracy import (
+    PLANE_TOLERANCE,
+    PlaneCheck,
+    plane_and_parallax,
+    transfer_error,
+)
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
 from sepfm_ros.geometry.estimate import Estimate
 from sepfm_ros.geometry.fundamental_problem import (
@@ -696,7 +701,7 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     if problem.opt.final_polish and problem.opt.lo == "lm" and plane is None:
         off_plane = None
         if check is not None and check.H is not None:
-            off_plane = transfer_error(check.H, d.pts1, d.pts2) >= 2.0 * threshold
+            off_plane = transfer_error(check.H, d.pts1, d.pts2) >= PLANE_TOLERANCE * threshold
         F = normalize_fundamental(polish_final(F, d, threshold, off_plane))
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
@@ -730,7 +735,7 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
     always challenged by plane-and-parallax candidates (a wrong F through the plane and its
     copy can gather some chance support off them)."""
     d, threshold = problem.data, problem.threshold
-    tol = 2.0 * threshold  # the plane check's homography tolerance
+    tol = PLANE_TOLERANCE * threshold  # the plane check's homography tolerance
     inl = d.distances(check.F) < threshold
     far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
     shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)

@@ -12,6 +12,11 @@ from sepfm_ros.geometry.nonlinear import (
     FINAL_TRUNCATION,
     LM_BAND,
     LM_MODEL_START,
+    _compose,
+    _parameter_derivatives,
+    _rotated,
+    _solve_damped,
+    _truncated_pass,
     noise_truncation,
     polish_final,
     polish_local_optimization,
@@ -27,6 +32,68 @@ def _cost(F: np.ndarray, data: Correspondences, t: float) -> float:
 def _perturbed(F: np.ndarray, rng: np.random.Generator, scale: float) -> np.ndarray:
     """F with every entry scaled by 1 + ``scale`` x N(0, 1) (rank 3 in general)."""
     return F / np.linalg.norm(F) * (1.0 + scale * rng.normal(size=(3, 3)))
+
+
+def _rotation(w: np.ndarray) -> np.ndarray:
+    """exp([w]x) by the matrix exponential's series (reference for the Rodrigues form)."""
+    K = np.array([[0.0, -w[2], w[1]], [w[2], 0.0, -w[0]], [-w[1], w[0], 0.0]])
+    R, term = np.eye(3), np.eye(3)
+    for k in range(1, 30):
+        term = term @ K / k
+        R = R + term
+    return R
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_lm_step_parts_match_their_reference_forms(seed):
+    """The scalar-code parts of one LM step (rotation, parameter derivatives, damped solve,
+    the pass that scores and writes the rows) against plain numpy forms of the same things."""
+    rng = np.random.default_rng(seed)
+    U = _rotation(rng.normal(size=3))
+    V = _rotation(rng.normal(size=3))
+    sigma = 0.3 + 0.5 * rng.random()
+    for w in (rng.normal(size=3), np.array([1e-14, 0.0, -2e-14]), np.zeros(3)):
+        assert np.allclose(_rotated(U, *w), U @ _rotation(w), atol=1e-14)
+    # dF/dp by central differences of F(p) = U exp([w]x) diag(1, s, 0) (V exp([z]x))^T
+    D = _parameter_derivatives(U, sigma, V)
+    h = 1e-6
+    for p in range(7):
+        dp = np.zeros(7)
+        dp[p] = h
+        Fp = _compose(_rotated(U, *dp[:3]), sigma + dp[6], _rotated(V, *dp[3:6]))
+        Fm = _compose(_rotated(U, *-dp[:3]), sigma - dp[6], _rotated(V, *-dp[3:6]))
+        assert np.allclose(D[p], ((Fp - Fm) / (2 * h)).ravel(), atol=1e-8)
+    A = rng.normal(size=(12, 7))
+    JtJ, Jte = A.T @ A, rng.normal(size=7)
+    for lam in (0.0, 1e-3, 10.0):
+        damped = JtJ + lam * np.diag(np.maximum(np.diag(JtJ), 1e-12))
+        assert np.allclose(_solve_damped(JtJ, Jte, lam), -np.linalg.solve(damped, Jte))
+    # the pass: cost and rows of the matches inside the truncation, by finite differences of e
+    pair = make_pair(n_inliers=60, n_outliers=30, noise=0.5, seed=seed)
+    data = Correspondences.from_pixels(pair.pts1, pair.pts2)
+    Fn = np.linalg.inv(data.T2).T @ pair.F @ np.linalg.inv(data.T1)
+    s1, s2, t = data.T1[0, 0], data.T2[0, 0], 1.5
+
+    h1, h2 = np.c_[data.x1, np.ones(len(data))], np.c_[data.x2, np.ones(len(data))]
+
+    def err(F: np.ndarray) -> np.ndarray:
+        """(N,) signed symmetric epipolar distance, px, of normalised F."""
+        d = symmetric_epipolar_distance(data.T2.T @ F @ data.T1, pair.pts1, pair.pts2)
+        return d * np.sign(np.einsum("ij,jk,ik->i", h2, F, h1))
+
+    e = err(Fn)
+    n = len(data)
+    rows, e_in = np.empty((n, 9)), np.empty(n)
+    cost, m = _truncated_pass(Fn, data.x1, data.x2, s1, s2, t * t, rows, e_in)
+    inside = np.abs(e) < t
+    assert m == np.count_nonzero(inside) and 0 < m < n
+    assert np.isclose(cost, np.minimum(e * e, t * t).sum())
+    assert np.allclose(e_in[:m], e[inside])
+    for a in range(9):
+        dF = np.zeros(9)
+        dF[a] = 1e-7
+        de = (err(Fn + dF.reshape(3, 3)) - err(Fn - dF.reshape(3, 3))) / 2e-7
+        assert np.allclose(rows[:m, a], de[inside], rtol=1e-4, atol=1e-6)
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -47,16 +47,76 @@ FINAL_TRUNCATION = 2.5
 _FAST = {"reassoc", "contract", "arcp", "nsz"}
 
 
+@numba.njit(cache=True, nogil=True, inline="always")
+def _matmul3(A: np.ndarray, B: np.ndarray) -> np.ndarray:
+    """(3, 3) A B in scalar code (numba's ``@`` calls BLAS, whose call costs more than a 3x3
+    product: the LM step's small products are most of its time on a few hundred matches)."""
+    C = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            C[i, j] = A[i, 0] * B[0, j] + A[i, 1] * B[1, j] + A[i, 2] * B[2, j]
+    return C
+
+
 @numba.njit(cache=True, nogil=True)
-def _rotation(w0: float, w1: float, w2: float) -> np.ndarray:
-    """(3, 3) rotation exp([w]x) (Rodrigues)."""
-    th = np.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
-    K = np.array([[0.0, -w2, w1], [w2, 0.0, -w0], [-w1, w0, 0.0]])
-    if th < 1e-12:
-        return np.eye(3) + K
-    a = np.sin(th) / th
-    b = (1.0 - np.cos(th)) / (th * th)
-    return np.eye(3) + a * K + b * (K @ K)
+def _rotated(U: np.ndarray, w0: float, w1: float, w2: float) -> np.ndarray:
+    """(3, 3) U exp([w]x) (Rodrigues: exp([w]x) = I + a [w]x + b [w]x^2, [w]x^2 = w w^T - |w|^2 I;
+    a = 1, b = 0 below |w| = 1e-12)."""
+    th2 = w0 * w0 + w1 * w1 + w2 * w2
+    th = np.sqrt(th2)
+    a, b = 1.0, 0.0
+    if th >= 1e-12:
+        a = np.sin(th) / th
+        b = (1.0 - np.cos(th)) / th2
+    w = (w0, w1, w2)
+    R = np.empty((3, 3))
+    for i in range(3):
+        for j in range(3):
+            R[i, j] = b * w[i] * w[j]
+        R[i, i] += 1.0 - b * th2
+    R[0, 1] -= a * w2
+    R[0, 2] += a * w1
+    R[1, 0] += a * w2
+    R[1, 2] -= a * w0
+    R[2, 0] -= a * w1
+    R[2, 1] += a * w0
+    return _matmul3(U, R)
+
+
+@numba.njit(cache=True, nogil=True)
+def _solve_damped(JtJ: np.ndarray, Jte: np.ndarray, lam: float) -> np.ndarray:
+    """(7,) step -(JtJ + lam diag(max(JtJ_pp, 1e-12)))^-1 Jte by Cholesky (the damped matrix is
+    positive definite; np.linalg.solve if rounding says otherwise)."""
+    n = JtJ.shape[0]
+    A = JtJ.copy()
+    for p in range(n):
+        A[p, p] += lam * max(JtJ[p, p], 1e-12)
+    L = np.zeros((n, n))
+    for j in range(n):
+        d = A[j, j]
+        for k in range(j):
+            d -= L[j, k] * L[j, k]
+        if not d > 0.0:
+            return -np.linalg.solve(A, Jte)
+        L[j, j] = np.sqrt(d)
+        for i in range(j + 1, n):
+            v = A[i, j]
+            for k in range(j):
+                v -= L[i, k] * L[j, k]
+            L[i, j] = v / L[j, j]
+    y = np.empty(n)
+    for i in range(n):
+        v = Jte[i]
+        for k in range(i):
+            v -= L[i, k] * y[k]
+        y[i] = v / L[i, i]
+    step = np.empty(n)
+    for i in range(n - 1, -1, -1):
+        v = y[i]
+        for k in range(i + 1, n):
+            v -= L[k, i] * step[k]
+        step[i] = v / L[i, i]
+    return -step
 
 
 @numba.njit(cache=True, nogil=True)
@@ -69,52 +129,118 @@ def _compose(U: np.ndarray, sigma: float, V: np.ndarray) -> np.ndarray:
     return F
 
 
-@numba.njit(cache=True, nogil=True)
-def _residual(F, x, y, u, v, s1, s2):
-    """(e px, r, l2 (2,), l1 (2,), 1/(s1 |l1|), 1/(s2 |l2|)) of one normalised match; e = inf
-    when an epipolar line is undefined (the match is then beyond any truncation)."""
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
+    """e^2 (px^2) of one normalised match under normalised F (3, 3), or inf when e^2 >= cap2
+    for certain (decided without square roots: e >= |r| / max(s1 |l1|, s2 |l2|)) or an
+    epipolar line is undefined."""
     l20 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
     l21 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
     l22 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
     l10 = F[0, 0] * u + F[1, 0] * v + F[2, 0]
     l11 = F[0, 1] * u + F[1, 1] * v + F[2, 1]
     r = u * l20 + v * l21 + l22
-    n2 = np.sqrt(l20 * l20 + l21 * l21)
-    n1 = np.sqrt(l10 * l10 + l11 * l11)
-    if n1 <= 1e-300 or n2 <= 1e-300:
-        return np.inf, r, l20, l21, l10, l11, 0.0, 0.0
-    i1 = 1.0 / (s1 * n1)
-    i2 = 1.0 / (s2 * n2)
-    return 0.5 * r * (i1 + i2), r, l20, l21, l10, l11, i1, i2
+    q2 = s2 * s2 * (l20 * l20 + l21 * l21)
+    q1 = s1 * s1 * (l10 * l10 + l11 * l11)
+    if r * r >= cap2 * max(q1, q2) or q1 <= 0.0 or q2 <= 0.0:
+        return np.inf
+    e = 0.5 * r * (1.0 / np.sqrt(q1) + 1.0 / np.sqrt(q2))
+    return e * e
 
 
-@numba.njit(cache=True, nogil=True)
-def _cost(F, x1, x2, s1, s2, t2):
-    """Truncated cost sum min(e^2, t^2) of normalised F (3, 3) over all matches."""
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
+    """One pass of normalised F (3, 3) over the matches x1, x2 (n, 2): the truncated cost
+    sum min(e_i^2, t2) and, of the m matches with e_i^2 < t2, the rows de_i/dF (row-major F)
+    into rows[:m] (n, 9) and e_i into e_in[:m]. Returns (cost, m).
+
+    A match is beyond the truncation when r^2 >= t2 max(q1, q2) (q = (s |l|)^2: e >= |r| /
+    max(s1 |l1|, s2 |l2|)); it then adds t2 without square roots or divisions.
+    """
     c = 0.0
+    m = 0
     for i in range(x1.shape[0]):
-        e = _residual(F, x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], s1, s2)[0]
-        c += min(e * e, t2)
-    return c
+        x, y, u, v = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1]
+        l20 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
+        l21 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
+        l22 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
+        l10 = F[0, 0] * u + F[1, 0] * v + F[2, 0]
+        l11 = F[0, 1] * u + F[1, 1] * v + F[2, 1]
+        r = u * l20 + v * l21 + l22
+        q2 = s2 * s2 * (l20 * l20 + l21 * l21)
+        q1 = s1 * s1 * (l10 * l10 + l11 * l11)
+        if r * r >= t2 * max(q1, q2) or q1 <= 0.0 or q2 <= 0.0:
+            c += t2  # beyond the truncation, or an undefined epipolar line (e = inf)
+            continue
+        i1 = 1.0 / np.sqrt(q1)  # 1 / (s1 |l1|)
+        i2 = 1.0 / np.sqrt(q2)
+        e = 0.5 * r * (i1 + i2)
+        e2 = e * e
+        if not e2 < t2:
+            c += t2
+            continue
+        c += e2
+        # de/dF_ab = c x2_a x1_b - k1 [b<2] l1_b x2_a - k2 [a<2] l2_a x1_b, with
+        # c = (i1 + i2) / 2, k1 = r i1^3 s1^2 / 2, k2 = r i2^3 s2^2 / 2
+        cc = 0.5 * (i1 + i2)
+        k1 = 0.5 * r * i1 * i1 * i1 * s1 * s1
+        k2 = 0.5 * r * i2 * i2 * i2 * s2 * s2
+        m0, m1, m2 = cc * x - k1 * l10, cc * y - k1 * l11, cc  # c x1_b - k1 l1_b
+        a0, a1 = k2 * l20, k2 * l21
+        rows[m, 0], rows[m, 1], rows[m, 2] = u * m0 - a0 * x, u * m1 - a0 * y, u * m2 - a0
+        rows[m, 3], rows[m, 4], rows[m, 5] = v * m0 - a1 * x, v * m1 - a1 * y, v * m2 - a1
+        rows[m, 6], rows[m, 7], rows[m, 8] = m0, m1, m2
+        e_in[m] = e
+        m += 1
+    return c, m
 
 
 @numba.njit(cache=True, nogil=True)
 def _parameter_derivatives(U: np.ndarray, sigma: float, V: np.ndarray) -> np.ndarray:
-    """(7, 3, 3) dF_n / d(parameter) at U diag(1, sigma, 0) V^T for U <- U exp([w]x),
-    V <- V exp([z]x), sigma <- sigma + ds: parameters (w0, w1, w2, z0, z1, z2, ds)."""
-    D = np.zeros((7, 3, 3))
-    S = np.zeros((3, 3))
-    S[0, 0], S[1, 1] = 1.0, sigma
+    """(7, 9) dF_n / d(parameter), row-major F_n, at U diag(1, sigma, 0) V^T for
+    U <- U exp([w]x), V <- V exp([z]x), sigma <- sigma + ds: parameters (w0, w1, w2, z0, z1, z2,
+    ds)."""
+    D = np.empty((7, 9))
+    SVt = np.zeros((3, 3))  # diag(1, sigma, 0) V^T
+    US = np.zeros((3, 3))  # U diag(1, sigma, 0)
+    for j in range(3):
+        SVt[0, j], SVt[1, j] = V[j, 0], sigma * V[j, 1]
+        US[j, 0], US[j, 1] = U[j, 0], sigma * U[j, 1]
+    Vt = V.T.copy()
     for k in range(3):
         E = np.zeros((3, 3))  # [e_k]x
         E[(k + 2) % 3, (k + 1) % 3] = 1.0
         E[(k + 1) % 3, (k + 2) % 3] = -1.0
-        D[k] = U @ E @ S @ V.T
-        D[3 + k] = -(U @ S @ E @ V.T)
-    P = np.zeros((3, 3))
-    P[1, 1] = 1.0
-    D[6] = U @ P @ V.T
+        A = _matmul3(U, _matmul3(E, SVt))
+        B = _matmul3(US, _matmul3(E, Vt))
+        for i in range(9):
+            D[k, i] = A[i // 3, i % 3]
+            D[3 + k, i] = -B[i // 3, i % 3]
+    for i in range(9):
+        D[6, i] = U[i // 3, 1] * V[i % 3, 1]  # U diag(0, 1, 0) V^T
     return D
+
+
+@numba.njit(cache=True, nogil=True)
+def _normal_equations(D: np.ndarray, M: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(J^T J (7, 7), J^T e (7,)) = (D M D^T, D b) from D = dF/d(parameters) (7, 9), M = G^T G
+    (9, 9) and b = G^T e (9,) of the rows G = de/dF, in scalar code."""
+    DM = np.zeros((7, 9))
+    JtJ = np.empty((7, 7))
+    Jte = np.zeros(7)
+    for p in range(7):
+        for j in range(9):
+            Jte[p] += D[p, j] * b[j]
+            for k in range(9):
+                DM[p, j] += D[p, k] * M[k, j]
+    for p in range(7):
+        for q in range(p, 7):
+            v = 0.0
+            for j in range(9):
+                v += DM[p, j] * D[q, j]
+            JtJ[p, q] = v
+            JtJ[q, p] = v
+    return JtJ, Jte
 
 
 @numba.njit(cache=True, nogil=True, fastmath=_FAST)
@@ -152,60 +278,43 @@ def refine_truncated_kernel(
     n = 0
     reach2 = LM_REACH * LM_REACH * t2
     for i in range(N):
-        e = _residual(G, x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], s1, s2)[0]
-        if e * e < reach2:
+        if (
+            _squared_error_within(G, x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], s1, s2, reach2)
+            < reach2
+        ):
             keep[n] = i
             n += 1
     x1 = x1[keep[:n]]
     x2 = x2[keep[:n]]
     held = (N - n) * t2
-    cost = _cost(G, x1, x2, s1, s2, t2) + held
+    # each pass scores a model and writes its rows (J_i = D g_i, g_i = de_i/dF of the matches
+    # inside the truncation): the pass of an accepted step gives the next step's normal equations
+    rows, e_in = np.empty((n, 9)), np.empty(n)
+    rows2, e_in2 = np.empty((n, 9)), np.empty(n)
+    cost, m = _truncated_pass(G, x1, x2, s1, s2, t2, rows, e_in)
+    cost += held
     lam = 1e-3
-    Gm = np.empty((n, 9))  # rows g_i of the matches within the truncation
-    ev = np.empty(n)
     small = False
     for _ in range(iterations):
-        # J_i = D g_i (D: dF/d(parameters), g_i = de_i/dF), so J^T J = D (G^T G) D^T with the
-        # rows g_i of the matches inside the truncation in G (one BLAS product per iteration)
-        D = _parameter_derivatives(U, sigma, V).reshape(7, 9)
-        m = 0
-        for i in range(n):
-            x, y, u, v = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1]
-            e, r, l20, l21, l10, l11, i1, i2 = _residual(G, x, y, u, v, s1, s2)
-            if not e * e < t2:
-                continue
-            # de/dF_ab = c x2_a x1_b - k1 [b<2] l1_b x2_a - k2 [a<2] l2_a x1_b, with
-            # c = (i1 + i2) / 2, k1 = r i1^3 s1^2 / 2, k2 = r i2^3 s2^2 / 2
-            c = 0.5 * (i1 + i2)
-            k1 = 0.5 * r * i1 * i1 * i1 * s1 * s1
-            k2 = 0.5 * r * i2 * i2 * i2 * s2 * s2
-            m0, m1, m2 = c * x - k1 * l10, c * y - k1 * l11, c  # c x1_b - k1 l1_b
-            a0, a1 = k2 * l20, k2 * l21
-            Gm[m, 0], Gm[m, 1], Gm[m, 2] = u * m0 - a0 * x, u * m1 - a0 * y, u * m2 - a0
-            Gm[m, 3], Gm[m, 4], Gm[m, 5] = v * m0 - a1 * x, v * m1 - a1 * y, v * m2 - a1
-            Gm[m, 6], Gm[m, 7], Gm[m, 8] = m0, m1, m2
-            ev[m] = e
-            m += 1
-        Gs = Gm[:m]
-        M = Gs.T @ Gs
-        b = Gs.T @ ev[:m]
-        JtJ = D @ M @ D.T
-        Jte = D @ b
+        # J_i = D g_i, so J^T J = D (G^T G) D^T with the rows g_i in G (one BLAS product)
+        Gs = rows[:m]
+        JtJ, Jte = _normal_equations(
+            _parameter_derivatives(U, sigma, V), Gs.T @ Gs, Gs.T @ e_in[:m]
+        )
         if np.abs(Jte).max() < 1e-12 * max(1.0, cost):
             break
         improved = False
         while lam < 1e10:
-            A = JtJ.copy()
-            for p in range(7):
-                A[p, p] += lam * max(JtJ[p, p], 1e-12)
-            step = -np.linalg.solve(A, Jte)
-            U2 = U @ _rotation(step[0], step[1], step[2])
-            V2 = V @ _rotation(step[3], step[4], step[5])
+            step = _solve_damped(JtJ, Jte, lam)
+            U2 = _rotated(U, step[0], step[1], step[2])
+            V2 = _rotated(V, step[3], step[4], step[5])
             sigma2 = sigma + step[6]
             G2 = _compose(U2, sigma2, V2)
-            cost2 = _cost(G2, x1, x2, s1, s2, t2) + held
+            cost2, m2 = _truncated_pass(G2, x1, x2, s1, s2, t2, rows2, e_in2)
+            cost2 += held
             if cost2 < cost:
                 U, V, sigma, G = U2, V2, sigma2, G2
+                rows, rows2, e_in, e_in2, m = rows2, rows, e_in2, e_in, m2
                 small = cost - cost2 < 1e-6 * cost
                 cost = cost2
                 lam = max(lam / 10.0, 1e-12)

@@ -144,6 +144,30 @@ def test_rank_line_pairs_matches_dense_accumulator(seed):
             assert np.array_equal(np.flatnonzero(sup), rsup)
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_rank_line_pairs_ties_at_the_candidate_cut_match_dense_accumulator(seed):
+    """Lines through the same few points: most candidates overlap and are skipped, so the ranking
+    reads down to the 20 * max_pairs cut, where many pairs tie on their count."""
+    rng = np.random.default_rng(seed)
+    n, k1, k2 = 200, 60, 60
+    I1 = np.zeros((n, k1), bool)
+    I2 = np.zeros((n, k2), bool)
+    I1[:25] = rng.random((25, k1)) < 0.6
+    I2[:25] = rng.random((25, k2)) < 0.6
+    I1[25:] = rng.random((n - 25, k1)) < 0.03
+    I2[25:] = rng.random((n - 25, k2)) < 0.03
+    deep = 0
+    for min_votes, max_pairs in ((2, 6), (4, 3), (3, 12)):
+        lines, supports = rank_line_pairs(I1, I2, min_votes, max_pairs)
+        ref = _rank_reference(I1, I2, min_votes, max_pairs)
+        assert len(lines) == len(ref) > 0
+        deep += len(ref) < max_pairs  # the cut, not max_pairs, ended the ranking
+        for (i, j), sup, (ri, rj, rsup) in zip(lines, supports, ref, strict=True):
+            assert (i, j) == (ri, rj)
+            assert np.array_equal(np.flatnonzero(sup), rsup)
+    assert deep > 0
+
+
 def test_rank_line_pairs_without_enough_votes_is_empty():
     I1 = np.zeros((20, 3), bool)
     I2 = np.ones((20, 4), bool)

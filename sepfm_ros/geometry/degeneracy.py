@@ -212,8 +212,10 @@ def plane_and_parallax(
         pairs = np.stack([off[i], off[j]], axis=1)
         if adaptive:
             pairs = pairs[rng.permutation(len(pairs))]
-    else:
-        pairs = np.stack([rng.choice(off, 2, replace=False) for _ in range(max_candidates)])
+    else:  # max_candidates random pairs of distinct off-plane matches
+        i = rng.integers(0, len(off), max_candidates)
+        j = rng.integers(0, len(off) - 1, max_candidates)
+        pairs = np.stack([off[i], off[j + (j >= i)]], axis=1)
     data = Correspondences.from_pixels(pts1, pts2)
     X1o, X2o = np.ascontiguousarray(data.X1[:, off]), np.ascontiguousarray(data.X2[:, off])
     best, best_cost, tried, start = None, np.inf, 0, 0

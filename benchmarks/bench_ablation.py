@@ -67,6 +67,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "final plane check off": (None, {"plane_check": False}),
     "in-sample plane check on": (None, {"sample_plane_check": True}),
     "final Sampson refinement off": (None, {"refine": False}),
+    "final LM polish of noisy matches off": (None, {"final_polish": False}),
     "periodic line-pair check on": (None, {"periodic_check": True}),
     "shifted-plane check off": (None, {"shifted_plane_check": False}),
     "all framework components above off": (None, FRAMEWORK_OFF),

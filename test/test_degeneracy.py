@@ -12,7 +12,12 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
-from sepfm_ros.geometry.degeneracy import chance_inliers, parallax_models, plane_and_parallax
+from sepfm_ros.geometry.degeneracy import (
+    chance_inliers,
+    parallax_models,
+    plane_and_parallax,
+    random_pairs,
+)
 from sepfm_ros.geometry.epipolar import fundamental_from_cameras
 from sepfm_ros.geometry.synthetic import look_at_camera
 
@@ -85,6 +90,18 @@ def test_parallax_model_from_exact_plane_and_two_points_is_the_true_f():
     F = parallax_models(H, np.r_[off1[:2]], np.r_[off2[:2]], np.array([[0, 1]]))[0]
     assert np.median(symmetric_epipolar_distance(F, off1, off2)) < 1e-4
     assert np.median(symmetric_epipolar_distance(F, pts1, pts2)) < 1e-4
+
+
+def test_random_pairs_are_distinct_and_uniform():
+    items = np.array([3, 8, 11, 40, 41])
+    pairs = random_pairs(np.random.default_rng(0), items, 20000)
+    assert pairs.shape == (20000, 2) and np.isin(pairs, items).all()
+    assert (pairs[:, 0] != pairs[:, 1]).all()
+    _, counts = np.unique(pairs, axis=0, return_counts=True)
+    assert len(counts) == 20  # every ordered pair of two different items
+    assert np.abs(counts - 1000).max() < 5 * np.sqrt(1000)
+    two = random_pairs(np.random.default_rng(1), np.array([5, 9]), 50)
+    assert {tuple(p) for p in two} == {(5, 9), (9, 5)}
 
 
 def test_chance_count_matches_random_pairs():

@@ -125,6 +125,14 @@ def parallax_models(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, pairs: np
     return normalize_fundamental(ex @ H)
 
 
+def random_pairs(rng: np.random.Generator, items: np.ndarray, k: int) -> np.ndarray:
+    """(k, 2) ordered pairs of two different entries of ``items`` (M >= 2,), each pair drawn
+    uniformly and independently (the second entry uniform among the other M - 1)."""
+    i = rng.integers(0, len(items), k)
+    j = rng.integers(0, len(items) - 1, k)
+    return np.stack([items[i], items[j + (j >= i)]], axis=1)
+
+
 def plane_and_parallax(
     F: np.ndarray,
     pts1: np.ndarray,
@@ -212,10 +220,8 @@ def plane_and_parallax(
         pairs = np.stack([off[i], off[j]], axis=1)
         if adaptive:
             pairs = pairs[rng.permutation(len(pairs))]
-    else:  # max_candidates random pairs of distinct off-plane matches
-        i = rng.integers(0, len(off), max_candidates)
-        j = rng.integers(0, len(off) - 1, max_candidates)
-        pairs = np.stack([off[i], off[j + (j >= i)]], axis=1)
+    else:
+        pairs = random_pairs(rng, off, max_candidates)
     data = Correspondences.from_pixels(pts1, pts2)
     X1o, X2o = np.ascontiguousarray(data.X1[:, off]), np.ascontiguousarray(data.X2[:, off])
     best, best_cost, tried, start = None, np.inf, 0, 0

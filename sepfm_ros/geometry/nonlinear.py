@@ -26,6 +26,7 @@ from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
     distances_within_kernel,
 )
+from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
 
 #: Levenberg-Marquardt iterations of :func:`refine_truncated` at most.
 LM_ITERATIONS = 10
@@ -92,30 +93,10 @@ def _solve_damped(JtJ: np.ndarray, Jte: np.ndarray, lam: float) -> np.ndarray:
     for p in range(n):
         A[p, p] += lam * max(JtJ[p, p], 1e-12)
     L = np.zeros((n, n))
-    for j in range(n):
-        d = A[j, j]
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            return -np.linalg.solve(A, Jte)
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, n):
-            v = A[i, j]
-            for k in range(j):
-                v -= L[i, k] * L[j, k]
-            L[i, j] = v / L[j, j]
-    y = np.empty(n)
-    for i in range(n):
-        v = Jte[i]
-        for k in range(i):
-            v -= L[i, k] * y[k]
-        y[i] = v / L[i, i]
+    if not cholesky_lower(A, 0.0, L):
+        return -np.linalg.solve(A, Jte)
     step = np.empty(n)
-    for i in range(n - 1, -1, -1):
-        v = y[i]
-        for k in range(i + 1, n):
-            v -= L[k, i] * step[k]
-        step[i] = v / L[i, i]
+    cholesky_solve(L, Jte, np.empty(n), step)
     return -step
 
 
@@ -129,11 +110,11 @@ def _compose(U: np.ndarray, sigma: float, V: np.ndarray) -> np.ndarray:
     return F
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
-def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
-    """e^2 (px^2) of one normalised match under normalised F (3, 3), or inf when e^2 >= cap2
-    for certain (decided without square roots: e >= |r| / max(s1 |l1|, s2 |l2|)) or an
-    epipolar line is undefined."""
+@numba.njit(cache=True, nogil=True, inline="always")
+def _epipolar_terms(F, x, y, u, v, s1, s2):
+    """(r, l20, l21, l10, l11, q1, q2) of one normalised match (x, y) <-> (u, v) under normalised
+    F (3, 3): r = x2^T F x1, l2 = F x1 and l1 = F^T x2 (first two coordinates), q = (s |l|)^2
+    (s the normalising scale of the line's image, so e = r (1 / sqrt(q1) + 1 / sqrt(q2)) / 2 px)."""
     l20 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
     l21 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
     l22 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
@@ -142,6 +123,15 @@ def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
     r = u * l20 + v * l21 + l22
     q2 = s2 * s2 * (l20 * l20 + l21 * l21)
     q1 = s1 * s1 * (l10 * l10 + l11 * l11)
+    return r, l20, l21, l10, l11, q1, q2
+
+
+@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
+    """e^2 (px^2) of one normalised match under normalised F (3, 3), or inf when e^2 >= cap2
+    for certain (decided without square roots: e >= |r| / max(s1 |l1|, s2 |l2|)) or an
+    epipolar line is undefined."""
+    r, _, _, _, _, q1, q2 = _epipolar_terms(F, x, y, u, v, s1, s2)
     if r * r >= cap2 * max(q1, q2) or q1 <= 0.0 or q2 <= 0.0:
         return np.inf
     e = 0.5 * r * (1.0 / np.sqrt(q1) + 1.0 / np.sqrt(q2))
@@ -161,14 +151,7 @@ def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
     m = 0
     for i in range(x1.shape[0]):
         x, y, u, v = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1]
-        l20 = F[0, 0] * x + F[0, 1] * y + F[0, 2]
-        l21 = F[1, 0] * x + F[1, 1] * y + F[1, 2]
-        l22 = F[2, 0] * x + F[2, 1] * y + F[2, 2]
-        l10 = F[0, 0] * u + F[1, 0] * v + F[2, 0]
-        l11 = F[0, 1] * u + F[1, 1] * v + F[2, 1]
-        r = u * l20 + v * l21 + l22
-        q2 = s2 * s2 * (l20 * l20 + l21 * l21)
-        q1 = s1 * s1 * (l10 * l10 + l11 * l11)
+        r, l20, l21, l10, l11, q1, q2 = _epipolar_terms(F, x, y, u, v, s1, s2)
         if r * r >= t2 * max(q1, q2) or q1 <= 0.0 or q2 <= 0.0:
             c += t2  # beyond the truncation, or an undefined epipolar line (e = inf)
             continue

@@ -16,6 +16,7 @@ from sepfm_ros.geometry.epipolar import (
     distances_within_kernel,
     rank2_unit_kernel,
 )
+from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
 from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
@@ -65,37 +66,13 @@ def smallest_eigenvector(G: np.ndarray, start: np.ndarray) -> np.ndarray:
         trace += G[i, i]
     L = np.zeros((n, n))
     ok = norm > 0.0 and np.isfinite(norm) and trace > 0.0 and np.isfinite(trace)
-    shift = 1e-14 * trace
-    for j in range(n):
-        if not ok:
-            break
-        d = G[j, j] + shift
-        for k in range(j):
-            d -= L[j, k] * L[j, k]
-        if not d > 0.0:
-            ok = False
-            break
-        L[j, j] = np.sqrt(d)
-        for i in range(j + 1, n):
-            t = G[i, j]
-            for k in range(j):
-                t -= L[i, k] * L[j, k]
-            L[i, j] = t / L[j, j]
+    ok = ok and cholesky_lower(G, 1e-14 * trace, L)
     if ok:
         v = start / np.sqrt(norm)
         y = np.empty(n)
         w = np.empty(n)
         for _ in range(INVERSE_ITERATIONS):
-            for i in range(n):  # L y = v
-                t = v[i]
-                for k in range(i):
-                    t -= L[i, k] * y[k]
-                y[i] = t / L[i, i]
-            for i in range(n - 1, -1, -1):  # L^T w = y
-                t = y[i]
-                for k in range(i + 1, n):
-                    t -= L[k, i] * w[k]
-                w[i] = t / L[i, i]
+            cholesky_solve(L, v, y, w)  # w = (G + 1e-14 tr(G) I)^-1 v
             nw, dot = 0.0, 0.0
             for i in range(n):
                 nw += w[i] * w[i]

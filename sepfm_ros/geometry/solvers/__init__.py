@@ -3,6 +3,7 @@
 - :func:`seven_point`: F from 7 correspondences (up to 3 real roots per sample).
 - :func:`eight_point`: F from >= 8 correspondences (linear least squares + rank 2).
 - :func:`line_homography_3pt`: the paper's 2x2 epipolar line homography H_e from 3 line points.
+- ``cholesky``: small SPD factorisations and solves shared by the LM step and the refits.
 """
 
 from sepfm_ros.geometry.solvers.eight_point import eight_point

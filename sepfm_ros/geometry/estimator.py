@@ -768,18 +768,15 @@ def _final_status(
     plane: str | None,
     unreliable: str | None = None,
 ) -> None:
-    """``est.status`` from its final inliers: too few, the plane check's reason, ``unreliable``
-    (a method's own reason), or inliers in a band around one line; else left as it is."""
+    """``est.status`` from its final inliers: too few, inliers in a band around one line (the
+    more specific reason when a plane holds them too: a band lies on many planes), the plane
+    check's reason, or ``unreliable`` (a method's own reason); else left as it is."""
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
-    elif plane is not None:
-        est.status = plane
-    elif unreliable is not None:
-        est.status = unreliable
-    else:
-        p1, p2 = d.pts1[est.inliers], d.pts2[est.inliers]
-        est.status = _line_band_status(p1, p2, threshold) or est.status
+        return
+    band = _line_band_status(d.pts1[est.inliers], d.pts2[est.inliers], threshold)
+    est.status = band or plane or unreliable or est.status
 
 
 def _final_model(

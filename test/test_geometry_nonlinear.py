@@ -22,6 +22,7 @@ from sepfm_ros.geometry.nonlinear import (
     polish_local_optimization,
     refine_truncated,
 )
+from sepfm_ros.geometry.solvers.design import column_gram
 from sepfm_ros.geometry.synthetic import make_pair
 
 
@@ -83,7 +84,7 @@ def test_lm_step_parts_match_their_reference_forms(seed):
 
     e = err(Fn)
     n = len(data)
-    rows, e_in = np.empty((n, 9)), np.empty(n)
+    rows, e_in = np.empty((9, n)), np.empty(n)
     cost, m = _truncated_pass(Fn, data.x1, data.x2, s1, s2, t * t, rows, e_in)
     inside = np.abs(e) < t
     assert m == np.count_nonzero(inside) and 0 < m < n
@@ -93,7 +94,10 @@ def test_lm_step_parts_match_their_reference_forms(seed):
         dF = np.zeros(9)
         dF[a] = 1e-7
         de = (err(Fn + dF.reshape(3, 3)) - err(Fn - dF.reshape(3, 3))) / 2e-7
-        assert np.allclose(rows[:m, a], de[inside], rtol=1e-4, atol=1e-6)
+        assert np.allclose(rows[a, :m], de[inside], rtol=1e-4, atol=1e-6)
+    # the normal-equation products of those rows
+    G = rows[:, :m].T
+    assert np.allclose(column_gram(rows, m), G.T @ G, rtol=1e-12, atol=1e-12 * np.abs(G).max() ** 2)
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -199,3 +199,27 @@ def test_smallest_eigenvector_by_inverse_iteration_agrees_with_eigh():
     v = smallest_eigenvector(G, np.ones(9))
     assert np.allclose(G @ v, v) and abs(np.linalg.norm(v) - 1.0) < 1e-12
     assert np.array_equal(smallest_eigenvector(G, np.zeros(9)), np.linalg.eigh(G)[1][:, 0])
+
+
+def test_weighted_design_gram_is_the_weighted_sum_of_row_outer_products():
+    """The refits' Gram matrix (weighted design rows as columns, ``column_gram``) against
+    sum_k w_k^2 r_k r_k^T of the epipolar rows r = kron([x2, 1], [x1, 1]), on a subset of rows."""
+    from sepfm_ros.geometry.refine import _weighted_design
+    from sepfm_ros.geometry.solvers.design import column_gram
+
+    rng = np.random.default_rng(4)
+    x1, x2 = rng.normal(size=(300, 2)), rng.normal(size=(300, 2))
+    idx = np.sort(rng.choice(300, 211, replace=False))
+    w = rng.uniform(0.1, 1.0, len(idx))
+    R = np.empty((9, len(idx)))
+    _weighted_design(x1, x2, idx, w, R)
+    rows = np.einsum(
+        "ka,kb->kab", np.c_[x2[idx], np.ones(len(idx))], np.c_[x1[idx], np.ones(len(idx))]
+    )
+    rows = rows.reshape(len(idx), 9)
+    expected = (rows * (w * w)[:, None]).T @ rows
+    G = column_gram(R, len(idx))
+    assert np.allclose(G, expected, rtol=1e-12, atol=1e-12 * np.abs(expected).max())
+    assert np.array_equal(G, G.T)
+    # only the first m columns count
+    assert np.allclose(column_gram(R, 50), (R[:, :50] @ R[:, :50].T), rtol=1e-12, atol=1e-10)

@@ -27,6 +27,7 @@ from sepfm_ros.geometry.epipolar import (
     distances_within_kernel,
 )
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
+from sepfm_ros.geometry.solvers.design import FAST_MATH, column_gram
 
 #: Levenberg-Marquardt iterations of :func:`refine_truncated` at most.
 LM_ITERATIONS = 10
@@ -43,9 +44,9 @@ LM_MODEL_START = 1.5
 #: threshold (wider than the noise truncation on forward motion, where a fit truncated nearer the
 #: threshold keeps the bias of the matches it leaves out; docs/design.md)
 FINAL_TRUNCATION = 2.5
-#: floating-point liberties of the LM kernel: reordered sums and fused multiply-adds (about a third
-#: faster); infinities and NaN keep their meaning (an undefined epipolar line is an inf residual)
-_FAST = {"reassoc", "contract", "arcp", "nsz"}
+#: floating-point liberties of the LM kernel (``FAST_MATH``: reordered sums and fused multiply-adds,
+#: about a third faster; an undefined epipolar line stays an inf residual)
+_FAST = FAST_MATH
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -142,7 +143,7 @@ def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
 def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
     """One pass of normalised F (3, 3) over the matches x1, x2 (n, 2): the truncated cost
     sum min(e_i^2, t2) and, of the m matches with e_i^2 < t2, the rows de_i/dF (row-major F)
-    into rows[:m] (n, 9) and e_i into e_in[:m]. Returns (cost, m).
+    into the columns rows[:, :m] (9, n) and e_i into e_in[:m]. Returns (cost, m).
 
     A match is beyond the truncation when r^2 >= t2 max(q1, q2) (q = (s |l|)^2: e >= |r| /
     max(s1 |l1|, s2 |l2|)); it then adds t2 without square roots or divisions.
@@ -170,9 +171,9 @@ def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
         k2 = 0.5 * r * i2 * i2 * i2 * s2 * s2
         m0, m1, m2 = cc * x - k1 * l10, cc * y - k1 * l11, cc  # c x1_b - k1 l1_b
         a0, a1 = k2 * l20, k2 * l21
-        rows[m, 0], rows[m, 1], rows[m, 2] = u * m0 - a0 * x, u * m1 - a0 * y, u * m2 - a0
-        rows[m, 3], rows[m, 4], rows[m, 5] = v * m0 - a1 * x, v * m1 - a1 * y, v * m2 - a1
-        rows[m, 6], rows[m, 7], rows[m, 8] = m0, m1, m2
+        rows[0, m], rows[1, m], rows[2, m] = u * m0 - a0 * x, u * m1 - a0 * y, u * m2 - a0
+        rows[3, m], rows[4, m], rows[5, m] = v * m0 - a1 * x, v * m1 - a1 * y, v * m2 - a1
+        rows[6, m], rows[7, m], rows[8, m] = m0, m1, m2
         e_in[m] = e
         m += 1
     return c, m
@@ -272,18 +273,19 @@ def refine_truncated_kernel(
     held = (N - n) * t2
     # each pass scores a model and writes its rows (J_i = D g_i, g_i = de_i/dF of the matches
     # inside the truncation): the pass of an accepted step gives the next step's normal equations
-    rows, e_in = np.empty((n, 9)), np.empty(n)
-    rows2, e_in2 = np.empty((n, 9)), np.empty(n)
+    rows, e_in = np.empty((9, n)), np.empty(n)
+    rows2, e_in2 = np.empty((9, n)), np.empty(n)
     cost, m = _truncated_pass(G, x1, x2, s1, s2, t2, rows, e_in)
     cost += held
     lam = 1e-3
     small = False
     for _ in range(iterations):
-        # J_i = D g_i, so J^T J = D (G^T G) D^T with the rows g_i in G (one BLAS product)
-        Gs = rows[:m]
-        JtJ, Jte = _normal_equations(
-            _parameter_derivatives(U, sigma, V), Gs.T @ Gs, Gs.T @ e_in[:m]
-        )
+        # J_i = D g_i, so J^T J = D (G^T G) D^T with the rows g_i in G
+        b = np.zeros(9)
+        for p in range(9):
+            for i in range(m):
+                b[p] += rows[p, i] * e_in[i]
+        JtJ, Jte = _normal_equations(_parameter_derivatives(U, sigma, V), column_gram(rows, m), b)
         if np.abs(Jte).max() < 1e-12 * max(1.0, cost):
             break
         improved = False

@@ -17,26 +17,24 @@ from sepfm_ros.geometry.epipolar import (
     rank2_unit_kernel,
 )
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
-from sepfm_ros.geometry.solvers.design import add_outer, design_row, symmetrize
+from sepfm_ros.geometry.solvers.design import column_gram
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
 REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _gram(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray) -> np.ndarray:
-    """9x9 Gram matrix sum_k w_k^2 r_k r_k^T of the design rows r = kron([x2, 1], [x1, 1]).
-
-    x1, x2: (N, 2) normalised coordinates; idx: (K,) rows used; w: (K,) weights.
-    """
-    G = np.zeros((9, 9))
-    r = np.empty(9)
+def _weighted_design(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray, R: np.ndarray):
+    """Write w_k r_k into the columns of R (9, K): the design rows r = kron([x2, 1], [x1, 1]) of
+    the matches idx (K,), weighted by w (K,); x1, x2: (N, 2) normalised coordinates. Their
+    Gram matrix (:func:`column_gram`) is sum_k w_k^2 r_k r_k^T."""
     for k in range(idx.shape[0]):
         i = idx[k]
-        design_row(x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], r)
-        add_outer(G, r, w[k] * w[k])
-    symmetrize(G)
-    return G
+        x, y, u, v, wk = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], w[k]
+        ux, vx = u * wk, v * wk
+        R[0, k], R[1, k], R[2, k] = ux * x, ux * y, ux
+        R[3, k], R[4, k], R[5, k] = vx * x, vx * y, vx
+        R[6, k], R[7, k], R[8, k] = wk * x, wk * y, wk
 
 
 #: Inverse iteration of :func:`smallest_eigenvector`: most steps, and the agreement of two
@@ -135,10 +133,13 @@ def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
     previous one); zeros for none (a full eigen-decomposition, see
     :func:`smallest_eigenvector`).
     """
-    F_n = _solve_gram(_gram(x1, x2, idx, np.ones(idx.shape[0])), start)
+    K = idx.shape[0]
+    R = np.empty((9, K))
+    _weighted_design(x1, x2, idx, np.ones(K), R)
+    F_n = _solve_gram(column_gram(R, K), start)
     for _ in range(irls_iterations):
-        G = _gram(x1, x2, idx, _sampson_weights(F_n, x1, x2, idx))
-        F_n = _solve_gram(G, F_n.ravel().copy())
+        _weighted_design(x1, x2, idx, _sampson_weights(F_n, x1, x2, idx), R)
+        F_n = _solve_gram(column_gram(R, K), F_n.ravel().copy())
     return denormalize_unit_kernel(F_n, T1, T2)
 
 

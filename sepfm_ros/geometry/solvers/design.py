@@ -1,4 +1,5 @@
-"""The epipolar design row shared by the seven- and eight-point solvers and the refits."""
+"""The epipolar design row shared by the seven- and eight-point solvers and the refits, and the
+Gram matrix of many rows shared by the refits and the Levenberg-Marquardt step."""
 
 from __future__ import annotations
 
@@ -15,6 +16,30 @@ def design_row(x: float, y: float, u: float, v: float, r: np.ndarray) -> None:
     r[0], r[1], r[2] = u * x, u * y, u
     r[3], r[4], r[5] = v * x, v * y, v
     r[6], r[7], r[8] = x, y, 1.0
+
+
+#: floating-point liberties of the kernels that sum over all matches: reordered sums (which
+#: vectorise) and fused multiply-adds; infinities and NaN keep their meaning
+FAST_MATH = {"reassoc", "contract", "arcp", "nsz"}
+
+
+@numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
+def column_gram(R: np.ndarray, m: int) -> np.ndarray:
+    """(9, 9) R[:, :m] R[:, :m]^T of the rows stored as the columns of R (9, n), one per match.
+
+    Each entry is one sum over the matches, which ``FAST_MATH`` lets the compiler vectorise
+    (a 9 x 9 outer product per match, or a BLAS product of a 9-column matrix, costs a few
+    times as much).
+    """
+    G = np.empty((9, 9))
+    for p in range(9):
+        for q in range(p, 9):
+            acc = 0.0
+            for i in range(m):
+                acc += R[p, i] * R[q, i]
+            G[p, q] = acc
+            G[q, p] = acc
+    return G
 
 
 @numba.njit(cache=True, nogil=True, inline="always")

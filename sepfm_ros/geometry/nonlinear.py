@@ -31,6 +31,8 @@ from sepfm_ros.geometry.solvers.design import FAST_MATH, column_gram
 
 #: Levenberg-Marquardt iterations of :func:`refine_truncated` at most.
 LM_ITERATIONS = 10
+#: :func:`refine_truncated` stops after a step that lowers the cost by less than this share.
+LM_TOLERANCE = 1e-4
 #: :func:`refine_truncated` fits the matches within this many truncations of the start model.
 LM_REACH = 3.0
 #: :func:`noise_truncation`: the truncation is ``LM_NOISE_FACTOR`` times the median distance of
@@ -300,7 +302,7 @@ def refine_truncated_kernel(
             if cost2 < cost:
                 U, V, sigma, G = U2, V2, sigma2, G2
                 rows, rows2, e_in, e_in2, m = rows2, rows, e_in2, e_in, m2
-                small = cost - cost2 < 1e-6 * cost
+                small = cost - cost2 < LM_TOLERANCE * cost
                 cost = cost2
                 lam = max(lam / 10.0, 1e-12)
                 improved = True

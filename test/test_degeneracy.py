@@ -180,3 +180,18 @@ def test_matches_along_one_line_are_flagged(method):
     assert est.status != "ok"
     if est.F is not None:  # the band is named, not only the plane that holds it
         assert "lie along one line" in est.status, est.status
+
+
+@pytest.mark.parametrize("seed", [4, 11, 18])
+def test_plane_check_keeps_a_right_f_whose_off_plane_support_is_small(seed):
+    # 10 off-plane points: the estimator without the check finds the right F, and a
+    # plane-and-parallax candidate that fits the plane's matches closer (a lower MSAC cost) but
+    # keeps only 1-2 of the off-plane ones must not replace it (it would then be flagged as a
+    # dominant plane and the right F lost)
+    pts1, pts2, off1, off2, _ = planar_majority_pair(n_off=10, n_out=30, seed=seed)
+    est = estimate_fundamental(pts1, pts2, SIZE, seed=seed, plane_check=False)
+    assert np.median(symmetric_epipolar_distance(est.F, off1, off2)) < 1.0
+    check = plane_and_parallax(est.F, pts1, pts2, 1.0, np.random.default_rng(seed))
+    assert check.planar and check.candidates > 0  # challenged: its support is not far above chance
+    assert not check.replaced and check.reason is None
+    assert np.median(symmetric_epipolar_distance(check.F, off1, off2)) < 1.0

@@ -256,19 +256,17 @@ def nearest_within(points: np.ndarray, queries: np.ndarray, radius: float) -> np
         cx = np.int64(np.floor(fx)) + 1
         cy = np.int64(np.floor(fy)) + 1
         best = r2
-        for dx in range(-1, 2):
-            for dy in range(-1, 2):
-                if cy + dy < 0 or cy + dy >= rows:
-                    continue
-                key = (cx + dx) * rows + cy + dy
-                k = np.searchsorted(sorted_keys, key)
-                while k < n and sorted_keys[k] == key:
-                    i = order[k]
-                    ex, ey = points[i, 0] - qx, points[i, 1] - qy
-                    d2 = ex * ex + ey * ey
-                    if d2 < best:
-                        best = d2
-                    k += 1
+        lo, hi = max(cy - 1, 0), min(cy + 1, rows - 1)
+        for dx in range(-1, 2):  # the cells (cx + dx, lo .. hi) have consecutive keys
+            first = (cx + dx) * rows
+            k = np.searchsorted(sorted_keys, first + lo)
+            while k < n and sorted_keys[k] <= first + hi:
+                i = order[k]
+                ex, ey = points[i, 0] - qx, points[i, 1] - qy
+                d2 = ex * ex + ey * ey
+                if d2 < best:
+                    best = d2
+                k += 1
         if best < r2:
             out[j] = np.sqrt(best)
     return out

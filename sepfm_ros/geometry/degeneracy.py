@@ -253,14 +253,13 @@ def plane_and_parallax(
     options = np.ascontiguousarray(np.stack([*options, F]))
     option_costs, _ = msac_kernel(options, data.X1, data.X2, threshold)
     k = int(np.argmin(option_costs[:-1]))
-    new_inl = _sed(options[k], pts1, pts2) < threshold
     # the last row is the input F; a candidate that fits the plane's matches closer but keeps
     # fewer of the clear-parallax ones than F does trades F's evidence off the plane for noise
     # on it (with a handful of off-plane points its lower cost says nothing), so F stays
-    if (
-        option_costs[k] < option_costs[-1]
-        and np.count_nonzero(far & new_inl) >= out.off_plane_inliers
-    ):
+    new_inl = None
+    if option_costs[k] < option_costs[-1]:
+        new_inl = _sed(options[k], pts1, pts2) < threshold
+    if new_inl is not None and np.count_nonzero(far & new_inl) >= out.off_plane_inliers:
         out.F = normalize_fundamental(options[k])
         out.replaced = True
         out.plane_inliers = int(np.count_nonzero(on & new_inl))

@@ -46,9 +46,6 @@ LM_MODEL_START = 1.5
 #: threshold (wider than the noise truncation on forward motion, where a fit truncated nearer the
 #: threshold keeps the bias of the matches it leaves out; docs/design.md)
 FINAL_TRUNCATION = 2.5
-#: floating-point liberties of the LM kernel (``FAST_MATH``: reordered sums and fused multiply-adds,
-#: about a third faster; an undefined epipolar line stays an inf residual)
-_FAST = FAST_MATH
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -129,7 +126,7 @@ def _epipolar_terms(F, x, y, u, v, s1, s2):
     return r, l20, l21, l10, l11, q1, q2
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+@numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
 def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
     """e^2 (px^2) of one normalised match under normalised F (3, 3), or inf when e^2 >= cap2
     for certain (decided without square roots: e >= |r| / max(s1 |l1|, s2 |l2|)) or an
@@ -141,7 +138,7 @@ def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
     return e * e
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+@numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
 def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
     """One pass of normalised F (3, 3) over the matches x1, x2 (n, 2): the truncated cost
     sum min(e_i^2, t2) and, of the m matches with e_i^2 < t2, the rows de_i/dF (row-major F)
@@ -229,7 +226,7 @@ def _normal_equations(D: np.ndarray, M: np.ndarray, b: np.ndarray) -> tuple[np.n
     return JtJ, Jte
 
 
-@numba.njit(cache=True, nogil=True, fastmath=_FAST)
+@numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
 def refine_truncated_kernel(
     F: np.ndarray,
     x1: np.ndarray,

@@ -54,6 +54,7 @@ FRAMEWORK_OFF = {
     "bailout": False,
     "lo": "plain",
     "plane_check_adaptive": False,
+    "lo_matches": 0,
 }
 #: label -> (method, options); method None = the default method
 CONFIGS: dict[str, tuple[str | None, dict]] = {
@@ -63,6 +64,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "bail-out off": (None, {"bailout": False}),
     "LO without its Levenberg-Marquardt step (Sampson refits only)": (None, {"lo": "sampson"}),
     "plain least-squares LO (Sampson refits and LM off)": (None, {"lo": "plain"}),
+    "LO fits on all matches (lo_matches 0; default: at most 600)": (None, {"lo_matches": 0}),
     "plane check on all 300 candidates (adaptive off)": (None, {"plane_check_adaptive": False}),
     "final plane check off": (None, {"plane_check": False}),
     "in-sample plane check on": (None, {"sample_plane_check": True}),

@@ -18,6 +18,38 @@ from sepfm_ros.geometry.synthetic import make_pair
 # (method, scene seed, lines, options, F, inliers, hypotheses, stage-1 hypotheses, fallback, status)
 PINNED = [
     (
+        "sep4",
+        25,
+        3,
+        {"lo_matches": 100},
+        [
+            [1.3473188193261447e-07, 4.042278978659043e-06, -0.0013631856207446274],
+            [6.8468002198001695e-06, 4.133892333991118e-07, -0.034560710983974584],
+            [-0.0012385204510210806, 0.030946385178826634, 0.9989216617079109],
+        ],
+        151,
+        117,
+        13,
+        False,
+        "ok",
+    ),
+    (
+        "ransac7",
+        22,
+        3,
+        {"lo_matches": 100},
+        [
+            [1.1116421899742374e-07, -1.0196435369743929e-05, 0.024183449194219966],
+            [1.612325434426018e-05, 2.3173567572752368e-06, 0.002560251398662135],
+            [-0.024500725959527882, -0.0055878997936602975, 0.9993883606145758],
+        ],
+        152,
+        471,
+        0,
+        False,
+        "ok",
+    ),
+    (
         "lmeds8",
         3,
         3,
@@ -210,6 +242,7 @@ def test_options_object_and_keywords_give_the_same_estimate():
         ({"line_distance": float("nan")}, "line_distance must be finite"),
         ({"hough_width": "wide"}, "hough_width must be int"),
         ({"triple": "some"}, "triple must be one of"),
+        ({"lo_matches": 8}, "lo_matches must be 0"),
     ],
 )
 def test_bad_options_raise_clear_errors(bad, message):

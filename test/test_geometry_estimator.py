@@ -227,3 +227,56 @@ def test_race_pool_options_are_checked_and_used():
         assert est.F is not None and est.line_pair is not None
         recovered = np.count_nonzero(est.inliers & sp.is_inlier) / np.count_nonzero(sp.is_inlier)
         assert recovered >= 0.95, f"{pool} recovered {recovered:.3f}"
+
+
+def test_spread_takes_matches_evenly_in_the_same_coordinates():
+    from sepfm_ros.geometry.correspondences import Correspondences
+
+    rng = np.random.default_rng(0)
+    data = Correspondences.from_pixels(
+        rng.uniform(0, 640, (1000, 2)), rng.uniform(0, 480, (1000, 2))
+    )
+    sub = data.spread(600)
+    idx = np.arange(600) * 1000 // 600
+    assert len(sub) == 600 and len(np.unique(idx)) == 600 and idx[-1] == 998
+    assert np.array_equal(sub.pts1, data.pts1[idx]) and np.array_equal(sub.x2, data.x2[idx])
+    assert np.array_equal(sub.X1, data.X1[:, idx]) and np.array_equal(sub.X2, data.X2[:, idx])
+    assert sub.T1 is data.T1 and sub.T2 is data.T2  # normalised as the whole set
+    assert data.spread(1000) is data and data.spread(5000) is data
+
+
+@pytest.mark.parametrize("method", ["sep4", "ransac7"])
+def test_local_optimisation_fits_on_at_most_lo_matches(method):
+    """Option lo_matches: the LO's refits and Levenberg-Marquardt steps see only the spread
+    subset (their models differ from those of LO on all matches), the race scores them on all
+    matches, and the estimate stays right; a cap at or above the match count changes nothing."""
+    from sepfm_ros.geometry.correspondences import Correspondences
+    from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
+
+    # 300 general + 3 x 12 line points, 0.5 px noise, 40 % outliers: 560 matches
+    sp = make_pair(n_inliers=300, n_outliers=224, n_lines=3, noise=0.5, seed=4)
+    n = len(sp.pts1)
+    runs = {
+        k: estimate_fundamental(
+            sp.pts1, sp.pts2, sp.image_size, method=method, threshold=1.5, seed=2, lo_matches=k
+        )
+        for k in (0, n, 120)
+    }
+    assert np.array_equal(runs[0].F, runs[n].F) and runs[0].hypotheses == runs[n].hypotheses
+    true = np.count_nonzero(sp.is_inlier)
+    for k, est in runs.items():
+        assert est.status == "ok", (k, est.status)
+        recovered = np.count_nonzero(est.inliers & sp.is_inlier) / true
+        false = np.count_nonzero(est.inliers & ~sp.is_inlier)
+        assert recovered >= 0.95 and false <= 0.05 * true, (k, recovered, false)
+    # the wiring: an arm's LO fits on its lo_data, and only there
+    data = Correspondences.from_pixels(sp.pts1, sp.pts2)
+    sub = data.spread(120)
+    whole = FundamentalProblem(data, threshold=1.5)
+    capped = FundamentalProblem(data, threshold=1.5, lo_data=sub)
+    alone = FundamentalProblem(sub, threshold=1.5)
+    F0 = normalize_fundamental(sp.F)
+    assert np.array_equal(capped.local_optimize(F0), alone.local_optimize(F0))
+    assert np.array_equal(capped.polish(F0, F0), alone.polish(F0, F0))
+    assert not np.array_equal(capped.local_optimize(F0), whole.local_optimize(F0))
+    assert capped.score(F0[None])[1][0] == whole.score(F0[None])[1][0] > len(sub)

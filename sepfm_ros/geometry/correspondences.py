@@ -37,6 +37,19 @@ class Correspondences:
         X2 = np.ascontiguousarray(homogeneous(pts2).T)
         return cls(pts1, pts2, x1, x2, T1, T2, X1, X2)
 
+    def spread(self, k: int) -> Correspondences:
+        """At most ``k`` >= 1 of the matches, taken evenly along their order (match i * N // k
+        for i < k: with the matches sorted best first, every quality in proportion), in the
+        same normalised coordinates (T1, T2); ``self`` when N <= k."""
+        n = len(self)
+        if n <= k:
+            return self
+        idx = np.arange(k, dtype=np.int64) * n // k
+        return Correspondences(
+            self.pts1[idx], self.pts2[idx], self.x1[idx], self.x2[idx], self.T1, self.T2,
+            np.ascontiguousarray(self.X1[:, idx]), np.ascontiguousarray(self.X2[:, idx]),
+        )  # fmt: skip
+
     def distances(self, F: np.ndarray) -> np.ndarray:
         """Symmetric epipolar distances (px) of (3, 3) -> (N,) or (M, 3, 3) -> (M, N) models."""
         if F.ndim == 2:

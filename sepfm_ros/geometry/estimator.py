@@ -45,6 +45,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field, fields, replace
+from functools import cached_property
 from typing import Any
 
 import numba
@@ -169,6 +170,11 @@ class EstimatorOptions:
             least 1.5x the threshold: ORB, video frames) is refined once more by
             Levenberg-Marquardt at a truncation of 2.5x the threshold
             (``nonlinear.polish_final``); precise matches (SIFT at full resolution) keep it.
+        lo_matches: local optimisation (refits and Levenberg-Marquardt; MSAC-scored methods,
+            the ``-lmeds`` ones refit on all) fits on at most this many matches, taken evenly
+            along the match order (``Correspondences.spread``; 0: on all); its models are
+            scored on all matches, and the final model is refitted on all of them. Its cost then
+            stops growing with the matches (docs/design.md, local optimisation).
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -198,6 +204,7 @@ class EstimatorOptions:
     periodic_check: bool = False
     shifted_plane_check: bool = True
     final_polish: bool = True
+    lo_matches: int = 600
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 
@@ -217,6 +224,8 @@ class EstimatorOptions:
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
+        if self.lo_matches != 0 and self.lo_matches < 16:
+            raise ValueError(f"option lo_matches must be 0 (all) or >= 16, got {self.lo_matches}")
         for name in ("line_distance", "line_threshold", "sample_plane_factor", "race_pool_ratio"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"option {name} must be positive, got {getattr(self, name)}")
@@ -520,6 +529,12 @@ class _Problem:
     def lmeds(self) -> bool:
         return self.scoring == "lmeds"
 
+    @cached_property
+    def lo_data(self) -> Correspondences:
+        """The matches local optimisation fits on (option ``lo_matches``), shared by every arm."""
+        k = self.opt.lo_matches
+        return self.data if k == 0 else self.data.spread(k)
+
     @property
     def model_points(self) -> int:
         return 7 if self.solver == "seven" else 8
@@ -543,7 +558,7 @@ class _Problem:
         pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         arm = FundamentalProblem(
             self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
-            lo=self.opt.lo,
+            lo=self.opt.lo, lo_data=self.lo_data,
         )  # fmt: skip
         sampling = replace(self.opt.sampling(), prosac_growth=max(1, self.budget.left()))
         return run_ransac(
@@ -670,6 +685,7 @@ def _stage2_arm(
         scale=problem.scale,
         lo=opt.lo,
         plane_tol=tol,
+        lo_data=problem.lo_data,
     )
 
 

@@ -270,6 +270,9 @@ class FundamentalProblem:
     number of matches within the robust inlier threshold 2.5 sigma of the best model so far
     (sigma of :func:`robust_scale`), so the count of the best model is its robust inlier set
     and counts of other models and arms compare with it; ``threshold`` plays no part.
+        lo_data: the matches local optimisation fits on (refits and Levenberg-Marquardt, MSAC
+            scoring), e.g. ``data.spread(k)``; its models are scored on ``data`` (default:
+            ``data`` itself).
         plane_tol: in-sample plane check (0: off): with at least 3 fixed line correspondences,
             a sample two of whose points share a plane with the line (both points' transfer
             errors under their least-squares homography with the line below ``plane_tol`` px,
@@ -289,6 +292,7 @@ class FundamentalProblem:
         lo: str = "lm",
         scale: RobustScale | None = None,
         plane_tol: float = 0.0,
+        lo_data: Correspondences | None = None,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(
@@ -300,6 +304,7 @@ class FundamentalProblem:
         if scoring not in SCORINGS:
             raise ValueError(f"unknown scoring {scoring!r}; expected one of {SCORINGS}")
         self.data = data
+        self.lo_data = data if lo_data is None else lo_data
         self.solver = solver
         self.threshold = float(threshold)
         self.scoring = scoring
@@ -379,7 +384,7 @@ class FundamentalProblem:
         if self.scoring == "lmeds":
             return lmeds_refit(model, self.data, self.model_points, irls_iterations=0)
         return iterative_refit(
-            model, self.data, self.threshold, factors=self.lo_factors,
+            model, self.lo_data, self.threshold, factors=self.lo_factors,
             irls_iterations=self.lo_irls,
         )  # fmt: skip
 
@@ -389,4 +394,4 @@ class FundamentalProblem:
         K = 0 for the other schemes and for lmeds."""
         if not self.lo_lm or self.scoring == "lmeds":
             return np.empty((0, 3, 3))
-        return polish_local_optimization(model, start, self.data, self.threshold)
+        return polish_local_optimization(model, start, self.lo_data, self.threshold)

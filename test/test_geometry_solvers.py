@@ -14,7 +14,13 @@ from sepfm_ros.geometry import (
     sampson_distance,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.epipolar import apply_transform, denormalize, normalization_transform
+from sepfm_ros.geometry.epipolar import (
+    apply_transform,
+    denormalize,
+    homogeneous,
+    homogeneous_columns,
+    normalization_transform,
+)
 from sepfm_ros.geometry.solvers import eight_point, line_homography_3pt, seven_point
 from sepfm_ros.geometry.solvers.line_homography import line_homography_lsq, transfer
 from sepfm_ros.geometry.solvers.seven_point import real_cubic_roots
@@ -127,6 +133,10 @@ def test_symmetric_epipolar_and_sampson_distance_hand_computed():
     assert np.allclose(s, [3.0 / np.sqrt(2.0), 0.0])
     # batched form agrees
     assert np.allclose(symmetric_epipolar_distance(np.stack([F, 2 * F]), p1, p2), [d, d])
+    # the (3, N) columns the compiled distances read: (x, y, 1), contiguous, float64
+    cols = homogeneous_columns(p2.astype(np.float32))
+    assert cols.flags.c_contiguous and cols.dtype == np.float64
+    assert np.array_equal(cols, homogeneous(p2).T)
 
 
 @pytest.mark.parametrize("k,r", [(7, 0.5), (3, 0.6), (4, 0.6), (8, 0.3), (1, 0.0)])

@@ -8,7 +8,7 @@ import numpy as np
 
 from sepfm_ros.geometry.epipolar import (
     hartley_kernel,
-    homogeneous,
+    homogeneous_columns,
     symmetric_epipolar_distance_h,
 )
 
@@ -33,8 +33,8 @@ class Correspondences:
         pts2 = np.ascontiguousarray(pts2, dtype=np.float64)
         T1, x1 = hartley_kernel(pts1)
         T2, x2 = hartley_kernel(pts2)
-        X1 = np.ascontiguousarray(homogeneous(pts1).T)
-        X2 = np.ascontiguousarray(homogeneous(pts2).T)
+        X1 = homogeneous_columns(pts1)
+        X2 = homogeneous_columns(pts2)
         return cls(pts1, pts2, x1, x2, T1, T2, X1, X2)
 
     def spread(self, k: int) -> Correspondences:

@@ -43,7 +43,13 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.epipolar import homogeneous, msac_kernel, normalize_fundamental
+from sepfm_ros.geometry.epipolar import (
+    homogeneous,
+    homogeneous_columns,
+    msac_kernel,
+    normalize_fundamental,
+    symmetric_epipolar_distance_h,
+)
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
 from sepfm_ros.geometry.ransac import ransac_trials, trials_needed
 from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
@@ -287,5 +293,7 @@ def chance_inliers(
     if n < 2:
         return 0.0
     perms = rng.permuted(np.tile(np.arange(n), (shuffles, 1)), axis=1)  # (S, N)
-    d = _sed(F, np.tile(pts1, (shuffles, 1)), pts2[perms.ravel()])
+    X1 = np.tile(homogeneous_columns(pts1), shuffles)  # (3, S N): column s N + i is match i
+    X2 = homogeneous_columns(pts2)[:, perms.ravel()]
+    d = symmetric_epipolar_distance_h(np.ascontiguousarray(F[None]), X1, X2)[0]
     return float(np.count_nonzero(d < threshold)) / shuffles

@@ -11,6 +11,15 @@ def homogeneous(pts: np.ndarray) -> np.ndarray:
     return np.concatenate([pts, np.ones((pts.shape[0], 1))], axis=1)
 
 
+def homogeneous_columns(pts: np.ndarray) -> np.ndarray:
+    """(N, 2) -> (3, N) C-contiguous columns (x, y, 1): the layout of the compiled distances."""
+    out = np.empty((3, pts.shape[0]))
+    out[0] = pts[:, 0]
+    out[1] = pts[:, 1]
+    out[2] = 1.0
+    return out
+
+
 def skew(v: np.ndarray) -> np.ndarray:
     """(3,) -> (3, 3) cross-product matrix [v]_x."""
     return np.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
@@ -329,7 +338,7 @@ def symmetric_epipolar_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarra
     """
     F = np.asarray(F, dtype=np.float64)
     d = symmetric_epipolar_distance_h(
-        F[None] if F.ndim == 2 else F, homogeneous(pts1).T, homogeneous(pts2).T
+        F[None] if F.ndim == 2 else F, homogeneous_columns(pts1), homogeneous_columns(pts2)
     )
     return d[0] if F.ndim == 2 else d
 
@@ -343,7 +352,7 @@ def sampson_distance(F: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.nd
     """
     F = np.asarray(F, dtype=np.float64)
     Fs = F[None] if F.ndim == 2 else F
-    r, l2, l1 = _epipolar_terms(Fs, homogeneous(pts1).T, homogeneous(pts2).T)
+    r, l2, l1 = _epipolar_terms(Fs, homogeneous_columns(pts1), homogeneous_columns(pts2))
     den = l2[:, 0] ** 2 + l2[:, 1] ** 2 + l1[:, 0] ** 2 + l1[:, 1] ** 2
     with np.errstate(divide="ignore", invalid="ignore"):
         d = np.abs(r) / np.sqrt(den)

@@ -1,11 +1,15 @@
-"""Benchmark: the separable estimator against seven-point RANSAC at high outlier rates.
+"""Benchmark: the separable estimator against RANSAC and the anchors at high outlier rates.
 
 Real SIFT matches (ratio 0.8) of every STEP-th pair of ../shared/data get extra wrong matches
 (keypoints of image a paired with keypoints of image b drawn at random from other matches, so
 the outliers sit on real features) until the outlier rate (matches > 1 px from the GT F) reaches
-each target. Printed per target: success (median GT-inlier error < 1 px), F-score against the GT
-inliers, and hypotheses of sep4 / sep5 / ransac7 / ransac8 (median and the median per-pair ratio
-sep4 / ransac7 over the runs where a line pair was used).
+each target. Every method runs at its defaults on the same matches (threshold 1 px, confidence
+0.99): ours (sep4, sep5, ransac7, ransac8) and the anchors (OpenCV's FM_RANSAC, USAC_MAGSAC,
+USAC_ACCURATE, and PoseLib when installed). Printed per target: success (median GT-inlier error
+< 1 px and >= 20 GT inliers recovered), F-score against the GT inliers, median hypotheses (n/a
+for OpenCV), median ms and median ms over USAC_MAGSAC's in the same run, the median per-pair
+hypothesis ratio sep4 / ransac7 over the runs where a line pair was used, and the default
+method's F-score minus each anchor's.
 
     python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--options prosac=1]
         [--write-docs]
@@ -25,13 +29,16 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
+from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
 from sepfm_ros.evaluation.metrics import positives, run_metrics
-from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
+from sepfm_ros.geometry import DEFAULT_METHOD, EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.ransac import ransac_trials
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
 METHODS = ("sep4", "sep5", "ransac7", "ransac8")
+#: the anchors, run through the evaluation registry at their defaults
+ANCHORS = ("cv-ransac", "cv-magsac", "cv-accurate") + (("poselib",) if poselib_available() else ())
 
 
 def with_outliers(pts_a, pts_b, pos, rate, rng):
@@ -68,13 +75,13 @@ def main(argv: list[str] | None = None) -> int:
     pairs = pairs[:: a.step]
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", 0.8))
     title = f"Outlier-rate benchmark ({len(pairs)} pairs, SIFT 0.8 + random wrong matches)"
-    lines = ["| outlier rate | method | success % | F-score | hypotheses (median) | ms (median) |",
-              "|---|---|---|---|---|---|"]  # fmt: skip
+    lines = ["| outlier rate | method | success % | F-score | hypotheses (median) | ms (median) "
+             "| ms / USAC_MAGSAC |", "|---|---|---|---|---|---|---|"]  # fmt: skip
     notes = []
     t0 = time.time()
     for rate in (float(r) for r in a.rates.split(",")):
         rng = np.random.default_rng(a.seed)
-        rows = {m: [] for m in METHODS}
+        rows = {m: [] for m in (*METHODS, *ANCHORS)}
         for i, pair in enumerate(pairs):
             m = cache.matches(pair)
             pos0 = positives(pair.F_gt, m.pts_a, m.pts_b)
@@ -91,15 +98,25 @@ def main(argv: list[str] | None = None) -> int:
                 rows[name].append(
                     (ok, met.f_score, e.hypotheses, ms, e.line_pair is not None, e.samples)
                 )
+            for name in ANCHORS:
+                r = REGISTRY[name].run(pa, pb, m.size_a, m.size_b, 1.0, 0.99, a.seed)
+                met = run_metrics(r.F, pa, pb, pos, 1.0)
+                ok = r.F is not None and met.median_error < 1.0 and not met.failed
+                hyp = np.nan if r.hypotheses is None else r.hypotheses
+                rows[name].append((ok, met.f_score, hyp, r.ms, False, 0))
             sys.stderr.write(
                 f"\r  rate {rate}: {i + 1}/{len(pairs)} pairs, {time.time() - t0:.0f} s"
             )
         sys.stderr.write("\n")
-        for name in METHODS:
+        magsac_ms = float(np.median([r[3] for r in rows["cv-magsac"]]))
+        for name in (*METHODS, *ANCHORS):
             r = np.array(rows[name], dtype=float)
+            hyp = "n/a" if np.isnan(r[:, 2]).all() else f"{np.nanmedian(r[:, 2]):.0f}"
+            ms = float(np.median(r[:, 3]))
+            label = f"{name} (default)" if name == DEFAULT_METHOD else name
             lines.append(
-                f"| {rate:.2f} | {name} | {100 * r[:, 0].mean():.1f} | {r[:, 1].mean():.3f} | "
-                f"{np.median(r[:, 2]):.0f} | {np.median(r[:, 3]):.1f} |"
+                f"| {rate:.2f} | {label} | {100 * r[:, 0].mean():.1f} | {r[:, 1].mean():.3f} | "
+                f"{hyp} | {ms:.1f} | {ms / magsac_ms:.2f} |"
             )
         s4, r7 = np.array(rows["sep4"], float), np.array(rows["ransac7"], float)
         used = s4[:, 4] > 0
@@ -108,6 +125,9 @@ def main(argv: list[str] | None = None) -> int:
             f"- outlier rate {rate:.2f}: sep4 / ransac7 hypotheses, median per-pair ratio over "
             f"the {int(used.sum())} runs with a line pair: {ratio:.2f}"
         )
+        f_default = np.mean([r[1] for r in rows[DEFAULT_METHOD]])
+        diffs = [f"{n}'s: {f_default - np.mean([r[1] for r in rows[n]]):+.3f}" for n in ANCHORS]
+        notes.append(f"  - {DEFAULT_METHOD} (default) F-score minus " + "; ".join(diffs))
         cap = EstimatorOptions.from_kwargs(**options).max_samples
         capped = int(np.count_nonzero(r7[:, 5] >= cap))
         if capped:

@@ -11,8 +11,10 @@ for OpenCV), median ms and median ms over USAC_MAGSAC's in the same run, the med
 hypothesis ratio sep4 / ransac7 over the runs where a line pair was used, and the default
 method's F-score minus each anchor's.
 
-    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--options prosac=1]
+    python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--options sprt=0]
         [--write-docs]
+
+``--options`` sets EstimatorOptions of our methods only; the anchors run at their defaults.
 
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
 """
@@ -66,6 +68,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
     )
+    ap.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     options = {k: int(v) for k, v in (kv.split("=") for kv in a.options.split(",") if kv)}
     if not (DATA / "pairs.json").is_file():
@@ -146,7 +149,7 @@ def main(argv: list[str] | None = None) -> int:
     if a.write_docs:
         command = bench_docs.command_line("bench_outliers.py", argv)
         path = bench_docs.write_section(
-            "bench_outliers", bench_docs.section("bench_outliers", title, command, body)
+            "bench_outliers", bench_docs.section("bench_outliers", title, command, body), a.doc
         )
         print(f"wrote {path}", file=sys.stderr)
     return 0

@@ -182,7 +182,7 @@ def test_matches_along_one_line_are_flagged(method):
         assert "lie along one line" in est.status, est.status
 
 
-@pytest.mark.parametrize("seed", [4, 11, 18])
+@pytest.mark.parametrize("seed", [4, 18, 47])
 def test_plane_check_keeps_a_right_f_whose_off_plane_support_is_small(seed):
     # 10 off-plane points: the estimator without the check finds the right F, and a
     # plane-and-parallax candidate that fits the plane's matches closer (a lower MSAC cost) but

@@ -175,6 +175,15 @@ class EstimatorOptions:
             along the match order (``Correspondences.spread``; 0: on all); its models are
             scored on all matches, and the final model is refitted on all of them. Its cost then
             stops growing with the matches (docs/design.md, local optimisation).
+        fixed_point_check: a stage-2 arm whose fixed line correspondences (the triple) are not
+            all within ``fixed_point_check`` times the threshold of the best model so far is
+            dropped, and its samples no longer count toward the F(k, r) stop: every model it
+            solves passes through them, so none of its samples can be all-inlier for that
+            model. The next line pair's arm or the fallback goes on. Without it, a triple
+            holding a match that lies near the line but is wrong (the extreme H_e inliers are
+            where such matches gather) let stage 2 stop on a worse basin (docs/design.md,
+            fixed-point check). 0: off; not applied with ``triple="all"`` (a least-squares
+            block, not passed through exactly) or with the LMedS methods.
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -205,6 +214,7 @@ class EstimatorOptions:
     shifted_plane_check: bool = True
     final_polish: bool = True
     lo_matches: int = 600
+    fixed_point_check: float = 1.5
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 
@@ -224,6 +234,8 @@ class EstimatorOptions:
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
+        if self.fixed_point_check < 0:
+            raise ValueError(f"option fixed_point_check must be >= 0, got {self.fixed_point_check}")
         if self.lo_matches != 0 and self.lo_matches < 16:
             raise ValueError(f"option lo_matches must be 0 (all) or >= 16, got {self.lo_matches}")
         for name in ("line_distance", "line_threshold", "sample_plane_factor", "race_pool_ratio"):
@@ -674,6 +686,9 @@ def _stage2_arm(
         return None
     f1, f2 = _triples(fit, d.pts1, d.pts2, opt.triple)
     tol = opt.sample_plane_factor * problem.threshold if opt.sample_plane_check else 0.0
+    fixed_tol = 0.0
+    if opt.triple != "all" and not problem.lmeds:
+        fixed_tol = opt.fixed_point_check * problem.threshold
     return fit, FundamentalProblem(
         d,
         problem.solver,
@@ -686,6 +701,7 @@ def _stage2_arm(
         lo=opt.lo,
         plane_tol=tol,
         lo_data=problem.lo_data,
+        fixed_tol=fixed_tol,
     )
 
 

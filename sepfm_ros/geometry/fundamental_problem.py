@@ -16,6 +16,7 @@ from sepfm_ros.geometry.epipolar import (
     denormalize_kernel,
     msac_kernel,
     sprt_msac_kernel,
+    symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.nonlinear import polish_local_optimization
 from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
@@ -278,6 +279,9 @@ class FundamentalProblem:
             errors under their least-squares homography with the line below ``plane_tol`` px,
             see :func:`line_plane_degenerate`) is rejected before it is solved; it still counts
             as drawn.
+        fixed_tol: px (0: no check), the fixed correspondences' check: every one of them must
+            lie within ``fixed_tol`` of a model for the arm's samples to be able to reach it
+            (:meth:`fixed_inliers`).
     """
 
     def __init__(
@@ -293,6 +297,7 @@ class FundamentalProblem:
         scale: RobustScale | None = None,
         plane_tol: float = 0.0,
         lo_data: Correspondences | None = None,
+        fixed_tol: float = 0.0,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(
@@ -312,6 +317,12 @@ class FundamentalProblem:
         self.f1 = np.zeros((0, 2)) if fixed1 is None else apply_transform(data.T1, fixed1)
         self.f2 = np.zeros((0, 2)) if fixed2 is None else apply_transform(data.T2, fixed2)
         self.f1, self.f2 = np.ascontiguousarray(self.f1), np.ascontiguousarray(self.f2)
+        self.fixed_px = (
+            (np.asarray(fixed1, dtype=np.float64), np.asarray(fixed2, dtype=np.float64))
+            if f > 0 and fixed_tol > 0
+            else None
+        )
+        self.fixed_tol = float(fixed_tol)
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)
@@ -325,6 +336,17 @@ class FundamentalProblem:
         if plane_tol > 0 and len(self.f1) >= 3:
             self.plane_basis = line_plane_basis(self.f1, self.f2)
             self.plane_tol = float(plane_tol) * float(data.T2[0, 0])  # px -> image 2 normalised
+
+    def fixed_inliers(self, model: np.ndarray) -> bool:
+        """Whether every fixed correspondence lies within ``fixed_tol`` px (symmetric epipolar
+        distance) of ``model`` (3, 3), pixels; True without the check. Every model this arm
+        solves passes through its fixed points, so when the best model leaves one of them
+        out, no sample of this arm can be all-inlier for it (a wrong line match among the
+        fixed points, or a wrong line pair)."""
+        if self.fixed_px is None:
+            return True
+        d = symmetric_epipolar_distance(model, *self.fixed_px)
+        return bool(np.all(d < self.fixed_tol))
 
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""

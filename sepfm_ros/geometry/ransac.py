@@ -91,6 +91,10 @@ class Problem(Protocol):
     # Optional: ``polish(model, start) -> models (J, ...)``, a second local-optimisation step from
     # ``start``, the best of ``model`` and its ``local_optimize`` results; when it returns
     # models they are offered instead of those results.
+    # Optional: ``fixed_inliers(model) -> bool``, for problems whose samples all contain fixed
+    # points (the separable stage 2): whether those points are inliers of ``model``. When they
+    # are not inliers of the best model, no sample of the arm can be all-inlier for it: the
+    # arm stops counting toward the stop and is dropped (see ``_Run.consistent``).
     # Optional: ``recount(model) -> int``, for problems whose inlier counts depend on the best
     # model so far (LMedS: matches within its robust scale). With it an arm's support is the
     # count of its lowest-cost model, re-counted whenever the best model improves, instead of
@@ -369,6 +373,7 @@ class _Arm:
     top_model: Any = None  #: lowest-cost model of any kind (minimal or refined)
     top_cost: float = np.inf
     overlap: tuple[Any, Any, float] | None = None  #: (its model, best model, share) for "model"
+    consistent: tuple[Any, bool] | None = None  #: (best model, its fixed points are inliers)
 
 
 class _Run:
@@ -472,9 +477,23 @@ class _Run:
         """Arm ``a`` holds the best model or its best support is near the best model's."""
         return a == self.leader or self.arms[a].best_count >= self.race.drop_ratio * self.best_count
 
-    def pools(self, a: int) -> bool:
-        """Arm ``a``'s samples count toward the stop (``race.pool_rule``, ``race.pool_ratio``)."""
+    def consistent(self, a: int) -> bool:
+        """Arm ``a``'s fixed points are inliers of the best model (its problem's
+        ``fixed_inliers``; True for problems without fixed points or before any model)."""
         arm = self.arms[a]
+        check = getattr(arm.problem, "fixed_inliers", None)
+        if check is None or self.best_model is None:
+            return True
+        if arm.consistent is None or arm.consistent[0] is not self.best_model:
+            arm.consistent = (self.best_model, check(self.best_model))
+        return arm.consistent[1]
+
+    def pools(self, a: int) -> bool:
+        """Arm ``a``'s samples count toward the stop (``race.pool_rule``, ``race.pool_ratio``);
+        never those of an arm whose fixed points are outliers of the best model."""
+        arm = self.arms[a]
+        if not self.consistent(a):
+            return False
         if a == self.leader:
             return True
         inliers = getattr(arm.problem, "inliers", None)
@@ -599,8 +618,16 @@ class _Run:
 
     def drop_lagging(self) -> None:
         """Drop arms whose support lags (after one local optimisation of their best model, since
-        a minimal sample with fixed line points is often badly conditioned)."""
-        if len(self.arms) <= 1 or self.best_count <= 0:
+        a minimal sample with fixed line points is often badly conditioned), and arms whose
+        fixed points are outliers of the best model (none of their samples can be all-inlier
+        for it; the leader's included: the next arm or the caller's fallback goes on)."""
+        if self.best_count <= 0:
+            return
+        for a in list(self.active):
+            if not self.consistent(a):
+                self.active.remove(a)
+                self.dropped.append(a)
+        if len(self.arms) <= 1:
             return
         for a in list(self.active):
             arm = self.arms[a]

@@ -157,7 +157,7 @@ class RansacResult:
     leader: int  #: index of the arm that produced the model (-1 when none)
     hypotheses: int  #: models scored (minimal-sample models and local-optimisation models)
     samples: list[int] = field(default_factory=list)  #: samples drawn per arm
-    dropped: list[int] = field(default_factory=list)  #: arms dropped for lagging support
+    dropped: list[int] = field(default_factory=list)  #: arms dropped: lagging, or fixed points out
     converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
     points_read: int = 0  #: points verified for minimal-sample models (SPRT / bail-out only)
     rejected: int = 0  #: minimal-sample models rejected by the SPRT

@@ -84,6 +84,24 @@ def test_an_arm_with_a_wrong_fixed_point_does_not_converge_and_is_dropped(seed):
     assert np.median(d[pair.is_inlier]) < 0.5
 
 
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_an_inconsistent_arm_is_kept_while_a_search_without_fixed_points_cannot_finish(seed):
+    # at the best model's inlier ratio (about 0.7) F(7, r) is about 50 samples: with a budget of
+    # 30 a search without fixed points could not confirm the best model, which may then still
+    # be a chance one, so the arm is not dropped at once (it spends the budget, unconverged);
+    # with 2000 it is dropped within a few samples
+    pair, data, fixed, pool = _scene()
+    w1, w2 = _shifted(pair, fixed, 2, 6.0)
+    sampling = EstimatorOptions().sampling()
+    out = {}
+    for cap in (30, 2000):
+        arm = FundamentalProblem(data, "seven", 1.0, fixed1=w1, fixed2=w2, pool=pool, fixed_tol=1.5)
+        rng = np.random.default_rng(seed)
+        out[cap] = run_ransac([arm], rng, max_samples=cap, sampling=sampling)
+    assert out[30].dropped == [] and out[30].samples == [30] and not out[30].converged
+    assert out[2000].dropped == [0] and out[2000].samples[0] <= 40
+
+
 def test_check_is_inert_for_arms_without_fixed_points():
     pair, data, _, _ = _scene()
     arm = FundamentalProblem(data, "seven", 1.0, fixed_tol=1.5)

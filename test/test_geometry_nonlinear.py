@@ -228,9 +228,7 @@ def test_final_polish_fits_the_true_matches_of_noisy_pairs_closer(noise):
     """With noise at about the threshold, the estimator's final polish (option final_polish)
     never raises the mean squared symmetric epipolar distance of the true matches (capped at
     5 px) and lowers it in half of 8 scenes or more; on precise matches it leaves the estimate as it
-    is. The fixed-point check is off so that both runs take the stage-2 path: at 0.8 px noise it
-    sends 4 of these 8 scenes to the fallback (a raw line point beyond 1.5 px of the best
-    model), which would compare the polish on other estimates than the ones it was measured on."""
+    is."""
     lower = 0
     for seed in range(8):
         pair = make_pair(n_inliers=150, n_outliers=60, n_lines=3, noise=noise, seed=seed)
@@ -238,7 +236,7 @@ def test_final_polish_fits_the_true_matches_of_noisy_pairs_closer(noise):
         for final_polish in (True, False):
             est = estimate_fundamental(
                 pair.pts1, pair.pts2, pair.image_size, threshold=1.0, seed=seed,
-                final_polish=final_polish, fixed_point_check=0.0,
+                final_polish=final_polish,
             )  # fmt: skip
             assert est.status == "ok"
             d = symmetric_epipolar_distance(est.F, pair.pts1, pair.pts2)[pair.is_inlier]

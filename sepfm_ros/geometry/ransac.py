@@ -616,15 +616,30 @@ class _Run:
         """The arms that agree with the best model drew F(k, r) samples together."""
         return self.leader >= 0 and self.pooled_samples() >= self.needed(self.leader)
 
+    def unfixed_affordable(self, a: int) -> bool:
+        """F(p, r) samples of p points (the ``model_points`` of arm ``a``'s problem, else its
+        sample size) fit in what is left of the budget at the best model's inlier ratio."""
+        p = self.arms[a].problem
+        k = int(getattr(p, "model_points", p.sample_size))
+        need = trials_needed(k, max(self.best_count, 0), p.n, self.confidence, self.max_samples)
+        return need <= self.budget.left()
+
     def drop_lagging(self) -> None:
         """Drop arms whose support lags (after one local optimisation of their best model, since
         a minimal sample with fixed line points is often badly conditioned), and arms whose
         fixed points are outliers of the best model (none of their samples can be all-inlier
-        for it; the leader's included: the next arm or the caller's fallback goes on)."""
+        for it; the leader's included: the next arm or the caller's fallback goes on). Such an
+        arm is dropped at once when a sample without fixed points could still find the best
+        model's consensus in what is left of the budget (F(p, r) for the arm's ``model_points``
+        p); at lower inlier ratios the best model may be a chance one that the arm's own
+        samples can still beat, and it is dropped only after the F(k, r) samples that would
+        have stopped the run."""
         if self.best_count <= 0:
             return
         for a in list(self.active):
-            if not self.consistent(a):
+            if not self.consistent(a) and (
+                self.arms[a].samples >= self.needed(a) or self.unfixed_affordable(a)
+            ):
                 self.active.remove(a)
                 self.dropped.append(a)
         if len(self.arms) <= 1:

@@ -250,12 +250,17 @@ class Feeder:
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_health, qos)
         self.executor = SingleThreadedExecutor(context=self.context)
         self.executor.add_node(self.node)
+        self.stop = threading.Event()
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()
 
     def _spin(self):
+        # spin_once until close() sets stop: the thread ends before the executor, node and
+        # context are torn down (executor.spin() racing that teardown could spin hot holding
+        # the GIL and starve the main thread's wait for the node process)
         try:
-            self.executor.spin()
+            while not self.stop.is_set():
+                self.executor.spin_once(timeout_sec=0.05)
         except Exception:  # noqa: BLE001 - shut down at exit
             pass
 
@@ -298,6 +303,8 @@ class Feeder:
         return False
 
     def close(self):
+        self.stop.set()
+        self.thread.join(timeout=5.0)
         self.executor.shutdown()
         self.node.destroy_node()
         self.rclpy.try_shutdown(context=self.context)

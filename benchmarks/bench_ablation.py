@@ -107,7 +107,7 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
                 F, ms = r.F, r.ms
                 hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan
             met = run_metrics(F, m.pts_a, m.pts_b, pos, 1.0)
-            ok = F is not None and met.median_error < 1.0 and not met.failed
+            ok = met.succeeded
             rows[label].append((ok, met.f_score, hyp, ms))
         sys.stderr.write(f"\r  {manifest.parent.name}: {i + 1}/{len(pairs)} pairs, "
                          f"{time.time() - t0:.0f} s")  # fmt: skip

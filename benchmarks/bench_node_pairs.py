@@ -131,7 +131,7 @@ def score(F: np.ndarray | None, pair: NodePair, threshold: float = 1.0) -> dict:
     met = run_metrics(F, m.pts_a, m.pts_b, pair.positives, threshold)
     med = met.median_error if F is not None else np.inf
     below = bool(np.isfinite(med) and med < 1.0)
-    return {"f": met.f_score, "med": med, "below": below, "ok": below and not met.failed}
+    return {"f": met.f_score, "med": med, "below": below, "ok": met.succeeded}
 
 
 def evaluable(pair: NodePair) -> bool:

@@ -167,7 +167,7 @@ def run_set(name: str, items: list, configs: list[str], seeds: list[int]) -> dic
                                          confidence=0.99, seed=seed, **opts)  # fmt: skip
                 ms = 1e3 * (time.perf_counter() - t)
                 met = run_metrics(e.F, pa, pb, pos, 1.0)
-                ok = e.F is not None and met.median_error < 1.0 and not met.failed
+                ok = met.succeeded
                 rows[c][seed].append((bool(ok), met.f_score, float(e.hypotheses), ms))
         sys.stderr.write(f"\r  {name}: {i + 1}/{len(items)} pairs, {time.time() - t0:.0f} s")
     sys.stderr.write("\n")

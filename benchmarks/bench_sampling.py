@@ -81,7 +81,7 @@ def main(argv: list[str] | None = None) -> int:
                     F, hyp = None, 0
                 ms = (time.perf_counter() - t) * 1e3
                 met = run_metrics(F, pa, pb, pos, 1.0)
-                ok = F is not None and met.median_error < 1.0 and not met.failed
+                ok = met.succeeded
                 rows.setdefault((name, cfg), []).append((ok, met.f_score, hyp, ms))
         perm = np.random.default_rng(a.seed).permutation(len(pa))
         for name, flag in CV.items():
@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
             ms = (time.perf_counter() - t) * 1e3
             F = F[:3] if F is not None and F.shape[0] >= 3 and np.all(np.isfinite(F)) else None
             met = run_metrics(F, pa, pb, pos, 1.0)
-            ok = F is not None and met.median_error < 1.0 and not met.failed
+            ok = met.succeeded
             rows.setdefault((name, "-"), []).append((ok, met.f_score, np.nan, ms))
         sys.stderr.write(f"\r  {i + 1}/{len(pairs)} pairs, {time.time() - t0:.0f} s")
     sys.stderr.write("\n")

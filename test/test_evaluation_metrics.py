@@ -59,10 +59,12 @@ def test_run_metrics_by_hand():
     assert m.mean_error == pytest.approx(0.6)
     assert m.median_error == pytest.approx(0.45)
     assert not m.evaluable and not m.failed  # 4 positives < 20: not evaluable
+    assert m.succeeded  # median 0.45 px < 1 px, not failed
 
     none = metrics.run_metrics(None, pts_a, pts_b, positive, threshold=1.0)
     assert none.n_inliers == 0 and none.f_score == 0.0
     assert math.isnan(none.mean_error) and math.isnan(none.median_error)
+    assert not none.succeeded
 
 
 @pytest.mark.parametrize(("recovered", "failed"), [(19, True), (20, False)])
@@ -74,6 +76,7 @@ def test_failure_rule_twenty_positives(recovered, failed):
     m = metrics.run_metrics(F_SHIFT, pts_a, pts_b, positive, threshold=1.0)
     assert m.n_positives == 25 and m.true_positives == recovered
     assert m.evaluable and m.failed is failed
+    assert m.succeeded is not failed  # median error 0.5 px: success follows the failure rule
 
 
 def _run(pair, f, med, failed=False, hyp=None, ms=1.0, evaluable=True, has_model=True):

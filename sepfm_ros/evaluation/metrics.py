@@ -101,6 +101,12 @@ class RunMetrics:
     evaluable: bool  # the pair has >= MIN_RECOVERED_POSITIVES positives
     failed: bool  # evaluable and fewer than MIN_RECOVERED_POSITIVES positives recovered
 
+    @property
+    def succeeded(self) -> bool:
+        """The benchmarks' success: an F whose median error on the GT positives is below 1 px
+        and that recovered enough of them (not ``failed``); False without F (NaN error)."""
+        return bool(self.median_error < 1.0 and not self.failed)
+
 
 def run_metrics(
     F: np.ndarray | None,

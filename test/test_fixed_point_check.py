@@ -124,14 +124,17 @@ def test_kitti_pair_whose_extreme_line_match_is_wrong(shared_data):
     pair = next(p for p in pairs if p.pair_id == "kitti_seq2/left/000006~left/000007")
     m = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", 0.95)).matches(pair)
     pos = positives(pair.F_gt, m.pts_a, m.pts_b)
+    # Inner sampling of the final model (on by default) also leaves that basin; it is off here
+    # so the check is measured alone, and then on without the check.
     f_score = {}
-    for check in (1.5, 0.0):
+    for check, inner in ((1.5, 0), (0.0, 0), (0.0, 20)):
         for seed in range(4):
             est = estimate_fundamental(
                 m.pts_a, m.pts_b, m.size_a, m.size_b, threshold=1.0, seed=seed,
-                fixed_point_check=check,
+                fixed_point_check=check, inner_samples=inner,
             )  # fmt: skip
             assert est.status == "ok"
-            f_score[check, seed] = run_metrics(est.F, m.pts_a, m.pts_b, pos, 1.0).f_score
-    assert all(f_score[1.5, s] > 0.95 for s in range(4)), f_score
-    assert sum(f_score[0.0, s] < 0.9 for s in range(4)) >= 2, f_score  # the trap is real
+            f_score[check, inner, seed] = run_metrics(est.F, m.pts_a, m.pts_b, pos, 1.0).f_score
+    assert all(f_score[1.5, 0, s] > 0.95 for s in range(4)), f_score
+    assert sum(f_score[0.0, 0, s] < 0.9 for s in range(4)) >= 2, f_score  # the trap is real
+    assert all(f_score[0.0, 20, s] > 0.95 for s in range(4)), f_score

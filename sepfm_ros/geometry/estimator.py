@@ -66,6 +66,7 @@ from sepfm_ros.geometry.fundamental_problem import (
     RobustScale,
     lmeds_final_inliers,
 )
+from sepfm_ros.geometry.inner_sampling import inner_sampling
 from sepfm_ros.geometry.line_homography_fit import LineHomographyFit, fit_line_homography
 from sepfm_ros.geometry.line_pairs import (
     LinePair,
@@ -184,6 +185,12 @@ class EstimatorOptions:
             where such matches gather) let stage 2 stop on a worse basin (docs/design.md,
             fixed-point check). 0: off; not applied with ``triple="all"`` (a least-squares
             block, not passed through exactly) or with the LMedS methods.
+        inner_samples: inner sampling of the final model (``inner_sampling.py``; LO-RANSAC's
+            inner RANSAC, once per estimate): this many samples of 14 of its inliers are fitted
+            by least squares, the best starts one more local optimisation, whose result is kept
+            if it lowers the MSAC cost at the threshold and not at the noise truncation. A
+            search that stops after few samples (the separable method's saving) tries few
+            basins; this tries one more from the final inliers. 0: off; not with LMedS.
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -215,6 +222,7 @@ class EstimatorOptions:
     final_polish: bool = True
     lo_matches: int = 600
     fixed_point_check: float = 1.5
+    inner_samples: int = 20
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 
@@ -229,8 +237,8 @@ class EstimatorOptions:
             if kind is float and not np.isfinite(converted):
                 raise ValueError(f"option {f.name} must be finite, got {value!r}")
             object.__setattr__(self, f.name, converted)
-        least = {"max_samples": 1, "hough_width": 1, "hough_min_votes": 1, "hough_points": 1,
-                 "max_line_pairs": 1, "min_line_inliers": 3}  # fmt: skip
+        least = {"max_samples": 1, "inner_samples": 0, "hough_width": 1, "hough_min_votes": 1,
+                 "hough_points": 1, "max_line_pairs": 1, "min_line_inliers": 3}  # fmt: skip
         for name, low in least.items():
             if getattr(self, name) < low:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
@@ -557,6 +565,14 @@ class _Problem:
             return 1
         return min(ransac_trials(k, 0.5, self.confidence), self.opt.max_samples)
 
+    def whole(self) -> FundamentalProblem:
+        """The problem over all matches (no fixed points), the ambiguous ones last in its pool."""
+        pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
+        return FundamentalProblem(
+            self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
+            lo=self.opt.lo, lo_data=self.lo_data,
+        )  # fmt: skip
+
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
         """Standard RANSAC over all matches (optionally starting from ``initial``), on what is
         left of the budget.
@@ -567,11 +583,7 @@ class _Problem:
         pool only, which on repetitive texture (a periodic row or a chessboard ranked first)
         holds the ambiguous matches and the plane.
         """
-        pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
-        arm = FundamentalProblem(
-            self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
-            lo=self.opt.lo, lo_data=self.lo_data,
-        )  # fmt: skip
+        arm = self.whole()
         sampling = replace(self.opt.sampling(), prosac_growth=max(1, self.budget.left()))
         return run_ransac(
             [arm], self.rng, self.confidence, self.opt.max_samples,
@@ -724,6 +736,11 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
         return
     d, threshold = problem.data, problem.threshold
     t4 = time.perf_counter()
+    # its own stream (spawned: the estimate's stream is not advanced), so switching it off
+    # changes no other step's draws
+    inner_rng = problem.rng.spawn(1)[0]
+    F, scored = inner_sampling(F, problem.whole(), inner_rng, problem.opt.inner_samples)
+    est.stage2_hypotheses += scored
     F, refits = _final_model(F, d, threshold, problem.opt.refine)
     est.stage2_hypotheses += refits  # final refits are scored against all matches too
     plane = None

@@ -187,8 +187,9 @@ class EstimatorOptions:
             block, not passed through exactly) or with the LMedS methods.
         inner_samples: inner sampling of the final model (``inner_sampling.py``; LO-RANSAC's
             inner RANSAC, once per estimate): this many samples of 14 of its inliers are fitted
-            by least squares, the best starts one more local optimisation, whose result is kept
-            if it lowers the MSAC cost at the threshold and not at the noise truncation. A
+            by least squares, the best starts the local optimisation's refits (no LM step), and
+            a refit is kept if it lowers the MSAC cost at the threshold and not at the noise
+            truncation. A
             search that stops after few samples (the separable method's saving) tries few
             basins; this tries one more from the final inliers. 0: off; not with LMedS.
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled

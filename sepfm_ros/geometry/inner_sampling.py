@@ -47,9 +47,11 @@ def inner_sampling(
         (F' (3, 3), models scored): F' is F or the refit the rule above picks; F unchanged
         when F has fewer than 2 x ``size`` inliers.
     """
+    if samples <= 0:
+        return F, 0
     data, threshold = problem.data, problem.threshold
     inliers = np.flatnonzero(data.distances(F) < threshold)
-    if samples <= 0 or len(inliers) < 2 * size:
+    if len(inliers) < 2 * size:
         return F, 0
     fits = np.empty((samples, 3, 3))
     for s in range(samples):

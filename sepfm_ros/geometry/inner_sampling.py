@@ -16,12 +16,14 @@ matches and misses the rest.
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 
-from sepfm_ros.geometry.epipolar import msac_kernel
+from sepfm_ros.geometry.epipolar import _WITHIN_MARGIN, _distance_within, msac_kernel
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.nonlinear import noise_truncation
-from sepfm_ros.geometry.refine import refit
+from sepfm_ros.geometry.ransac import draw_samples
+from sepfm_ros.geometry.refine import _normalized_model, _refit_kernel
 
 #: Matches per inner sample: twice the seven of a minimal sample.
 INNER_SAMPLE_SIZE = 14
@@ -53,15 +55,40 @@ def inner_sampling(
     inliers = np.flatnonzero(data.distances(F) < threshold)
     if len(inliers) < 2 * size:
         return F, 0
-    fits = np.empty((samples, 3, 3))
-    for s in range(samples):
-        mask = np.zeros(len(data), dtype=bool)
-        mask[rng.choice(inliers, size, replace=False)] = True
-        fits[s] = refit(data, mask)
-    cost, _ = msac_kernel(fits, data.X1, data.X2, threshold)
-    optimized = problem.local_optimize(fits[int(np.argmin(cost))])
+    drawn = draw_samples(rng, inliers, size, samples)
+    best = _best_inner_fit(
+        np.ascontiguousarray(F, dtype=np.float64), data.x1, data.x2, data.X1, data.X2,
+        data.T1, data.T2, drawn, float(threshold),
+    )  # fmt: skip
+    optimized = problem.local_optimize(best)
     candidates = np.ascontiguousarray(np.concatenate([F[None], optimized]))
     cost, _ = msac_kernel(candidates, data.X1, data.X2, threshold)
     wide, _ = msac_kernel(candidates, data.X1, data.X2, noise_truncation(F, data, threshold))
     cost[wide > wide[0]] = np.inf  # never worse at the noise truncation than F
     return candidates[int(np.argmin(cost))], samples + len(optimized)
+
+
+@numba.njit(cache=True, nogil=True)
+def _best_inner_fit(F, x1, x2, X1, X2, T1, T2, drawn, threshold):
+    """The least-squares fit (3, 3) of the sample (row of ``drawn`` (S, size), match indices)
+    with the lowest MSAC cost at ``threshold`` over all matches (X1, X2: (>=2, N) px; x1, x2:
+    (N, 2) normalised). Each fit starts its inverse iteration from F (the samples are F's
+    inliers); a fit's scoring stops once its partial cost passes the best so far."""
+    t2 = threshold * threshold
+    cap2 = t2 * _WITHIN_MARGIN
+    start = _normalized_model(F, T1, T2)
+    best = F.copy()
+    best_cost = np.inf
+    N = X1.shape[1]
+    for s in range(drawn.shape[0]):
+        G = _refit_kernel(x1, x2, drawn[s], 0, T1, T2, start)
+        c = 0.0
+        for i in range(N):
+            d = _distance_within(G, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
+            c += d * d if d < threshold else t2
+            if c >= best_cost:
+                break
+        if c < best_cost:
+            best_cost = c
+            best = G
+    return best

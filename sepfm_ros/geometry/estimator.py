@@ -192,6 +192,10 @@ class EstimatorOptions:
             truncation. A
             search that stops after few samples (the separable method's saving) tries few
             basins; this tries one more from the final inliers. 0: off; not with LMedS.
+        oriented: every RANSAC stage drops, before scoring, the models for which the
+            sample's own matches (fixed line points included) break the oriented epipolar
+            constraint (``solvers/orientation.py``): no scene point behind a camera. Most are
+            spurious roots of the seven-point cubic.
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -224,6 +228,7 @@ class EstimatorOptions:
     lo_matches: int = 600
     fixed_point_check: float = 1.5
     inner_samples: int = 20
+    oriented: bool = True
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 
@@ -571,7 +576,7 @@ class _Problem:
         pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         return FundamentalProblem(
             self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
-            lo=self.opt.lo, lo_data=self.lo_data,
+            lo=self.opt.lo, lo_data=self.lo_data, oriented=self.opt.oriented,
         )  # fmt: skip
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
@@ -715,6 +720,7 @@ def _stage2_arm(
         plane_tol=tol,
         lo_data=problem.lo_data,
         fixed_tol=fixed_tol,
+        oriented=opt.oriented,
     )
 
 

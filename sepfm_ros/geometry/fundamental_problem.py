@@ -21,6 +21,7 @@ from sepfm_ros.geometry.epipolar import (
 from sepfm_ros.geometry.nonlinear import polish_local_optimization
 from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
+from sepfm_ros.geometry.solvers.orientation import oriented_consistent
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
 SCORINGS = ("msac", "lmeds")
@@ -140,7 +141,7 @@ def line_plane_basis(f1: np.ndarray, f2: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
+def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol, oriented):
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
@@ -148,8 +149,10 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
     seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the
     fixed line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none;
     a sample in which two points share a plane with the line (``line_plane_degenerate`` at
-    ``plane_tol``, image 2's normalised units) yields no model. Returns (F (K, 3, 3) in px at
-    unit Frobenius norm, (K,) sample index of each model).
+    ``plane_tol``, image 2's normalised units) yields no model. oriented: a model whose sample
+    (fixed points included) breaks the oriented epipolar constraint
+    (``solvers.orientation.oriented_consistent``) is dropped. Returns (F (K, 3, 3) in px at unit
+    Frobenius norm, (K,) sample index of each model).
     """
     B, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
     keep = np.empty(B, dtype=np.int64)
@@ -178,6 +181,8 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol):
     out_sid = np.empty_like(sid)
     n_out = 0
     for m in range(F_n.shape[0]):
+        if oriented and not oriented_consistent(F_n[m], y1[sid[m]], y2[sid[m]]):
+            continue
         if denormalize_kernel(F_n[m], T1, T2, F[n_out]):
             out_sid[n_out] = keep[sid[m]]
             n_out += 1
@@ -282,6 +287,8 @@ class FundamentalProblem:
         fixed_tol: px (0: no check), the fixed correspondences' check: every one of them must
             lie within ``fixed_tol`` of a model for the arm's samples to be able to reach it
             (:meth:`fixed_inliers`).
+        oriented: drop the models for which the sample's own matches break the oriented
+            epipolar constraint (``solvers.orientation``), before they are scored.
     """
 
     def __init__(
@@ -298,6 +305,7 @@ class FundamentalProblem:
         plane_tol: float = 0.0,
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
+        oriented: bool = True,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(
@@ -323,6 +331,7 @@ class FundamentalProblem:
             else None
         )
         self.fixed_tol = float(fixed_tol)
+        self.oriented = bool(oriented)
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)
@@ -352,7 +361,7 @@ class FundamentalProblem:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
         return solve_samples_kernel(
             self.f1, self.f2, self.data.x1, self.data.x2, samples, self.data.T1, self.data.T2,
-            self.solver == "seven", self.plane_basis, self.plane_tol,
+            self.solver == "seven", self.plane_basis, self.plane_tol, self.oriented,
         )  # fmt: skip
 
     def distances(self, F: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ The default method is whatever ``sepfm_ros.geometry.estimate_fundamental`` defau
 runs. castle-P19 and castle-P30 share byte-identical images: a pair whose two images are
 byte-identical to an earlier pair's is dropped (``--keep-duplicates`` keeps it).
 
-    python benchmarks/bench_lines.py [--max-pairs N] [--seeds 0] [--methods a,b]
+    python benchmarks/bench_lines.py [--max-pairs N] [--seeds 0,1,2] [--methods a,b]
         [--settings hard,paper] [--out FILE.md] [--write-docs [--doc FILE] [--eval-doc FILE]]
 
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py) and
@@ -274,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--manifest", type=Path, default=DATA / "pairs.json")
     ap.add_argument("--max-pairs", type=int, default=0, help="evenly spaced subset (0: all)")
     ap.add_argument("--keep-duplicates", action="store_true")
-    ap.add_argument("--seeds", default="0", help="comma-separated seeds")
+    ap.add_argument("--seeds", default="0,1,2", help="comma-separated seeds")
     ap.add_argument("--methods", default=",".join(METHODS), help="comma list (evaluation names)")
     ap.add_argument("--settings", default="hard,paper", help=f"comma list of {list(SETTINGS)}")
     ap.add_argument("--out", type=Path, default=None, help="also write the report here (.md)")

@@ -6,7 +6,7 @@ methods run in the same process on the same matches at equal threshold (1 px) an
 the GT F), median GT-inlier error, success rate (median GT-inlier error < 1 px and >= 20 GT
 inliers recovered), hypotheses, and median ms per pair; then the ratios the targets are stated in.
 
-    python benchmarks/bench_estimators.py [--step 1] [--seeds 0] [--ratios 0.75,0.95]
+    python benchmarks/bench_estimators.py [--step 1] [--seeds 0,1,2] [--ratios 0.75,0.95]
         [--out FILE.md] [--write-docs [--readme README.md]]
 
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py),
@@ -146,7 +146,7 @@ def headline(settings: dict[float, dict]) -> str:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--step", type=int, default=1, help="use every STEP-th pair")
-    ap.add_argument("--seeds", default="0", help="comma-separated seeds")
+    ap.add_argument("--seeds", default="0,1,2", help="comma-separated seeds")
     ap.add_argument("--ratios", default="0.75,0.95")
     ap.add_argument("--out", type=Path, default=None, help="also write the report here (.md)")
     ap.add_argument(

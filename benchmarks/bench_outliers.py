@@ -143,10 +143,9 @@ def main(argv: list[str] | None = None) -> int:
             notes.append(
                 f"  - ransac7 stopped at the sample cap ({cap}) in {capped} of {len(r7)} runs "
                 f"instead of at F(7, {rate:.2f}) = {ransac_trials(7, rate, 0.99, 10**9)} "
-                f"samples; with it capped, the ratio cannot fall below F(4, {rate:.2f}) / "
-                f"{cap} = {floor:.2f} (stage 2 alone draws F(4, r) samples, solved into as "
-                f"many models per sample as ransac7's); sep4's median samples: "
-                f"{np.median(s4[:, 5]):.0f}"
+                f"samples; with it capped, the samples ratio cannot fall below F(4, {rate:.2f}) "
+                f"/ {cap} = {floor:.2f} (stage 2 alone draws F(4, r) samples); sep4's median "
+                f"samples: {np.median(s4[:, 5]):.0f}"
             )
     body = "\n".join(lines + [""] + notes)
     print(f"## {title}\n\n{body}")

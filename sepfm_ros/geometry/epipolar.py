@@ -113,6 +113,29 @@ def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True, nogil=True)
+def msac_cost(
+    f: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float, stop_at: float
+) -> tuple[float, int]:
+    """MSAC score of one model f (3, 3) on (>=2, N) pixel points, summed in index order: (cost,
+    sum of min(d^2, t^2); inlier count, d < t), d in px. The sum stops as soon as it reaches
+    ``stop_at`` (inf: never), returning the partial cost and count."""
+    t2 = threshold * threshold
+    cap2 = t2 * _WITHIN_MARGIN
+    c = 0.0
+    k = 0
+    for i in range(X1.shape[1]):
+        d = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
+        if d < threshold:
+            c += d * d
+            k += 1
+        else:
+            c += t2
+        if c >= stop_at:
+            break
+    return c, k
+
+
+@numba.njit(cache=True, nogil=True)
 def msac_kernel(
     F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -120,24 +143,11 @@ def msac_kernel(
 
     Returns (cost (M,), sum of min(d^2, t^2); inlier count (M,), d < t), d in px.
     """
-    M, N = F.shape[0], X1.shape[1]
-    t2 = threshold * threshold
-    cap2 = t2 * _WITHIN_MARGIN
+    M = F.shape[0]
     cost = np.empty(M)
     count = np.zeros(M, dtype=np.int64)
     for m in range(M):
-        f = F[m]
-        c = 0.0
-        k = 0
-        for i in range(N):
-            d = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
-            if d < threshold:
-                c += d * d
-                k += 1
-            else:
-                c += t2
-        cost[m] = c
-        count[m] = k
+        cost[m], count[m] = msac_cost(F[m], X1, X2, threshold, np.inf)
     return cost, count
 
 

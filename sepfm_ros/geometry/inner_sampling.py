@@ -19,7 +19,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.epipolar import _WITHIN_MARGIN, _distance_within, msac_kernel
+from sepfm_ros.geometry.epipolar import msac_cost, msac_kernel
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.nonlinear import noise_truncation
 from sepfm_ros.geometry.ransac import draw_samples
@@ -74,20 +74,12 @@ def _best_inner_fit(F, x1, x2, X1, X2, T1, T2, drawn, threshold):
     with the lowest MSAC cost at ``threshold`` over all matches (X1, X2: (>=2, N) px; x1, x2:
     (N, 2) normalised). Each fit starts its inverse iteration from F (the samples are F's
     inliers); a fit's scoring stops once its partial cost passes the best so far."""
-    t2 = threshold * threshold
-    cap2 = t2 * _WITHIN_MARGIN
     start = _normalized_model(F, T1, T2)
     best = F.copy()
     best_cost = np.inf
-    N = X1.shape[1]
     for s in range(drawn.shape[0]):
         G = _refit_kernel(x1, x2, drawn[s], 0, T1, T2, start)
-        c = 0.0
-        for i in range(N):
-            d = _distance_within(G, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
-            c += d * d if d < threshold else t2
-            if c >= best_cost:
-                break
+        c, _ = msac_cost(G, X1, X2, threshold, best_cost)
         if c < best_cost:
             best_cost = c
             best = G

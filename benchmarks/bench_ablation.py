@@ -56,7 +56,6 @@ FRAMEWORK_OFF = {
     "plane_check_adaptive": False,
     "lo_matches": 0,
     "inner_samples": 0,
-    "oriented": False,
 }
 #: label -> (method, options); method None = the default method
 CONFIGS: dict[str, tuple[str | None, dict]] = {
@@ -69,7 +68,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "LO fits on all matches (lo_matches 0; default: at most 600)": (None, {"lo_matches": 0}),
     "fixed-point check off": (None, {"fixed_point_check": 0.0}),
     "inner sampling of the final model off": (None, {"inner_samples": 0}),
-    "oriented epipolar constraint off": (None, {"oriented": False}),
+    "oriented epipolar constraint on": (None, {"oriented": True}),
     "plane check on all 300 candidates (adaptive off)": (None, {"plane_check_adaptive": False}),
     "final plane check off": (None, {"plane_check": False}),
     "in-sample plane check on": (None, {"sample_plane_check": True}),

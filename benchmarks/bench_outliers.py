@@ -8,9 +8,8 @@ each target. Every method runs at its defaults on the same matches (threshold 1 
 USAC_ACCURATE, and PoseLib when installed). Printed per target: success (median GT-inlier error
 < 1 px and >= 20 GT inliers recovered), F-score against the GT inliers, median hypotheses (n/a
 for OpenCV), median ms and median ms over USAC_MAGSAC's in the same run, the median per-pair
-ratios sep4 / ransac7 of hypotheses (models scored: the oriented epipolar constraint drops
-models of both before scoring, most of all those of ransac7's outlier samples) and of samples
-drawn (the paper's F(k, r)) over the runs where a line pair was used, and the default method's
+ratios sep4 / ransac7 of hypotheses (models scored) and of samples drawn (the paper's F(k, r))
+over the runs where a line pair was used, and the default method's
 F-score minus each anchor's.
 
     python benchmarks/bench_outliers.py [--step 4] [--rates 0.5,0.65,0.8] [--options sprt=0]

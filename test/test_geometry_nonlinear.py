@@ -12,11 +12,14 @@ from sepfm_ros.geometry.nonlinear import (
     FINAL_TRUNCATION,
     LM_BAND,
     LM_MODEL_START,
+    WIDE_MIN_PX,
+    WIDE_TRUNCATION,
     _compose,
     _parameter_derivatives,
     _rotated,
     _solve_damped,
     _truncated_pass,
+    multi_scale_cost,
     noise_truncation,
     polish_final,
     polish_local_optimization,
@@ -221,6 +224,65 @@ def test_final_polish_refines_the_model_of_noisy_matches_only():
     assert lost.any()
     assert polish_final(F, data, 1.0, off_plane=lost) is F
     assert np.array_equal(polish_final(F, data, 1.0, off_plane=dG), G)
+
+
+def _few_true_matches_and_near_misses(seed: int):
+    """25 true matches (0.2 px noise), 40 uniform wrong ones, and 25 wrong ones 1.2-2.6 px off
+    their true epipolar lines, all on one side: within a 3 px threshold of the true F, where they
+    pull a fit truncated at 3 px off it. Returns (pts1, pts2, true mask, F)."""
+    sp = make_pair(n_inliers=25, n_outliers=40, noise=0.2, seed=seed)
+    rng = np.random.default_rng(seed)
+    k = 25
+    w, h = sp.image_size
+    x1 = np.column_stack([rng.uniform(0, w, k), rng.uniform(0, h, k)])
+    lines = np.column_stack([x1, np.ones(k)]) @ sp.F.T  # epipolar lines in image 2
+    norm = np.linalg.norm(lines[:, :2], axis=1, keepdims=True)
+    p = np.column_stack([rng.uniform(0, w, k), rng.uniform(0, h, k)])
+    foot = p - ((p * lines[:, :2]).sum(1, keepdims=True) + lines[:, 2:]) / norm * (
+        lines[:, :2] / norm
+    )
+    x2 = foot + rng.uniform(1.2, 2.6, (k, 1)) * lines[:, :2] / norm
+    true = np.concatenate([sp.is_inlier, np.zeros(k, dtype=bool)])
+    return np.vstack([sp.pts1, x1]), np.vstack([sp.pts2, x2]), true, sp.F
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_final_polish_at_a_wide_threshold_follows_the_true_matches(seed):
+    """At a 3 px threshold (WIDE_TRUNCATION x 3 px >= WIDE_MIN_PX) polish_final refines F at
+    1 px and keeps the refined model by its multi-scale cost: from the 3 px-truncated optimum,
+    which the near misses pull off, the true matches' median error falls by a third or more."""
+    pts1, pts2, true, F_true = _few_true_matches_and_near_misses(seed)
+    assert WIDE_TRUNCATION * 3.0 >= WIDE_MIN_PX > WIDE_TRUNCATION * 1.0
+    data = Correspondences.from_pixels(pts1, pts2)
+    F = refine_truncated(F_true, data, 3.0)
+    G = polish_final(F, data, 3.0)
+    assert G is not F
+    scales = np.array([1.0, 1.5, 3.0])
+    assert (
+        multi_scale_cost(np.stack([G]), data, scales)[0]
+        < multi_scale_cost(np.stack([F]), data, scales)[0]
+    )
+
+    def err(M):
+        return np.median(symmetric_epipolar_distance(M, pts1, pts2)[true])
+
+    assert err(G) < 0.67 * err(F), (err(G), err(F))
+    assert err(G) < 1.5 * err(F_true)
+
+
+def test_multi_scale_cost_is_the_sum_of_normalised_msac_costs():
+    sp = make_pair(n_inliers=60, n_outliers=30, noise=0.5, seed=1)
+    data = Correspondences.from_pixels(sp.pts1, sp.pts2)
+    models = np.stack(
+        [sp.F / np.linalg.norm(sp.F), _perturbed(sp.F, np.random.default_rng(0), 1e-3)]
+    )
+    d = symmetric_epipolar_distance(models, sp.pts1, sp.pts2)
+    expected = sum(np.minimum(d * d, t * t).sum(axis=1) / (t * t) for t in (0.5, 1.0, 2.0))
+    assert np.allclose(multi_scale_cost(models, data, np.array([0.5, 1.0, 2.0])), expected)
+    assert (
+        multi_scale_cost(models, data, np.array([1.0]))[0]
+        < multi_scale_cost(models, data, np.array([1.0]))[1]
+    )
 
 
 @pytest.mark.parametrize("noise", [0.5, 0.8])

@@ -37,27 +37,13 @@ def test_lmeds8_is_a_method_of_the_estimator_and_of_the_evaluation():
     assert est.stage1_hypotheses == 0 and est.line_pair is None
 
 
-# sep4-lmeds on scene 3: the line pair's triple holds a match 1.7 px off the true F (2.2 robust
-# scales), which every model of that arm passes through exactly; the least-median model and its
-# refits keep the bias (scale off by more than 30 % on 7 of seeds 103-112, status still "ok" at
-# the 8 px threshold). A known weakness of the fixed-triple LMedS method, kept visible here.
-_SEP4_LMEDS_BIASED = pytest.mark.xfail(
-    strict=True, reason="sep4-lmeds: a noisy fixed line point biases the least-median model"
-)
-
-
-@pytest.mark.parametrize(
-    "method, scene",
-    [(m, s) for m in LMEDS for s in (3, 9) if (m, s) != ("sep4-lmeds", 3)]
-    + [pytest.param("sep4-lmeds", 3, marks=_SEP4_LMEDS_BIASED)],
-)
-def test_robust_scale_and_inliers_match_the_truth(method, scene):
+def _check_robust_scale_and_inliers(method: str, scene: int, seed: int) -> None:
     # 120 general + 3 x 12 line points, 100 outliers (39 %), 0.5 px noise per coordinate
     noise = 0.5
     sp = make_pair(n_inliers=120, n_outliers=100, n_lines=3, noise=noise, seed=scene)
     # the threshold is far too large for the data: an LMedS method must not depend on it
     est = estimate_fundamental(
-        sp.pts1, sp.pts2, sp.image_size, method=method, threshold=8.0, seed=scene + 100
+        sp.pts1, sp.pts2, sp.image_size, method=method, threshold=8.0, seed=seed
     )
     assert est.status == "ok"
     true_d = symmetric_epipolar_distance(sp.F, sp.pts1, sp.pts2)[sp.is_inlier]
@@ -70,6 +56,27 @@ def test_robust_scale_and_inliers_match_the_truth(method, scene):
     d = symmetric_epipolar_distance(est.F, sp.pts1, sp.pts2)
     assert np.array_equal(est.inliers, d < 2.5 * est.scale)
     assert np.count_nonzero(d < 8.0) > est.num_inliers
+
+
+@pytest.mark.parametrize(
+    "method, scene", [(m, s) for m in LMEDS for s in (3, 9) if (m, s) != ("sep4-lmeds", 3)]
+)
+def test_robust_scale_and_inliers_match_the_truth(method, scene):
+    _check_robust_scale_and_inliers(method, scene, scene + 100)
+
+
+# sep4-lmeds on scene 3: the line pair's triple holds a match 1.7 px off the true F (2.2 robust
+# scales), which every model of that arm passes through exactly; the least-median model and its
+# refits keep the bias (the scale is off by more than 30 % on most of seeds 103-112, with status
+# still "ok" at the 8 px threshold). A known weakness of the fixed-triple LMedS method, kept
+# visible here over ten seeds (one seed's pass or fail depends on the random stream): the day
+# every seed passes, this strict xfail fails and the case joins the test above.
+@pytest.mark.xfail(
+    strict=True, reason="sep4-lmeds: a noisy fixed line point biases the least-median model"
+)
+def test_sep4_lmeds_with_a_noisy_fixed_line_point():
+    for seed in range(103, 113):
+        _check_robust_scale_and_inliers("sep4-lmeds", 3, seed)
 
 
 def test_final_scale_is_the_reweighted_robust_scale():

@@ -167,10 +167,9 @@ def test_good_line_pair_overtakes_a_wrong_one_on_repetitive_texture(order):
         # true inliers); the scene short of 0.95 holds the right F with a 0.948 mask
         assert min(recovered["sep4"]) >= 0.9
     for m in ("sep4", "sep5"):
-        # the paper's saving is in samples (F(k, r)); in models scored too, though less: the
-        # oriented constraint drops most of ransac7's outlier-sample models before scoring
+        # the paper's saving, in samples (F(k, r)) and in models scored
         assert np.median(samples[m]) < 0.6 * np.median(samples["ransac7"])
-        assert np.median(hypotheses[m]) < np.median(hypotheses["ransac7"])
+        assert np.median(hypotheses[m]) < 0.5 * np.median(hypotheses["ransac7"])
 
 
 def test_model_rule_pools_arms_whose_models_hold_the_best_models_inliers():

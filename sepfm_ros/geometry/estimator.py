@@ -167,10 +167,12 @@ class EstimatorOptions:
         shifted_plane_check: the final plane check discounts matches on a period-shifted copy
             of the plane (``periodic.shifted_plane_copy``; a chessboard matched one square off)
             and then challenges F with plane-and-parallax candidates.
-        final_polish: with ``lo="lm"``, the final model of noisy matches (noise truncation at
-            least 1.5x the threshold: ORB, video frames) is refined once more by
-            Levenberg-Marquardt at a truncation of 2.5x the threshold
-            (``nonlinear.polish_final``); precise matches (SIFT at full resolution) keep it.
+        final_polish: with ``lo="lm"``, the final model is refined once more by
+            Levenberg-Marquardt (``nonlinear.polish_final``): on noisy matches (noise
+            truncation at least 1.5x the threshold: ORB, video frames) at a truncation of 2.5x
+            the threshold; at thresholds of 3 px and more also at a third of it, kept when its
+            multi-scale cost is lower (a wide threshold lets wrong matches within it pull the
+            fit on pairs with few true matches). Precise matches at 1 px keep the model.
         lo_matches: local optimisation (refits and Levenberg-Marquardt; MSAC-scored methods,
             the ``-lmeds`` ones refit on all) fits on at most this many matches, taken evenly
             along the match order (``Correspondences.spread``; 0: on all); its models are
@@ -195,7 +197,9 @@ class EstimatorOptions:
         oriented: every RANSAC stage drops, before scoring, the models for which the
             sample's own matches (fixed line points included) break the oriented epipolar
             constraint (``solvers/orientation.py``): no scene point behind a camera. Most are
-            spurious roots of the seven-point cubic.
+            spurious roots of the seven-point cubic. Off by default: at high outlier rates a
+            contaminated sample's model that breaks it can still be near the true F, and its
+            local optimisation then finds the best model (docs/design.md).
         race_pool, race_pool_ratio: which racing stage-2 arms' samples count toward the pooled
             F(k, r) stop besides the leader's: ``"support"``, arms with at least
             ``race_pool_ratio`` of the best model's inlier count; ``"model"``, arms whose best
@@ -228,7 +232,7 @@ class EstimatorOptions:
     lo_matches: int = 600
     fixed_point_check: float = 1.5
     inner_samples: int = 20
-    oriented: bool = True
+    oriented: bool = False
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
 

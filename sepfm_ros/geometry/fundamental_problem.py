@@ -305,7 +305,7 @@ class FundamentalProblem:
         plane_tol: float = 0.0,
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
-        oriented: bool = True,
+        oriented: bool = False,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(

@@ -25,6 +25,7 @@ from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
     distances_within_kernel,
+    msac_kernel,
 )
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
 from sepfm_ros.geometry.solvers.design import FAST_MATH, column_gram
@@ -46,6 +47,13 @@ LM_MODEL_START = 1.5
 #: threshold (wider than the noise truncation on forward motion, where a fit truncated nearer the
 #: threshold keeps the bias of the matches it leaves out; docs/design.md)
 FINAL_TRUNCATION = 2.5
+#: :func:`polish_final` at wide thresholds: F is refined at ``WIDE_TRUNCATION`` x the threshold
+#: when that is at least ``WIDE_MIN_PX`` px (thresholds of 3 px and more; below a pixel a fit
+#: would cut true matches of sub-pixel features), and kept if its :func:`multi_scale_cost` at
+#: ``WIDE_SCALES`` x the threshold is lower.
+WIDE_TRUNCATION = 1.0 / 3.0
+WIDE_MIN_PX = 1.0
+WIDE_SCALES = (1.0 / 3.0, 0.5, 1.0)
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
@@ -403,19 +411,44 @@ def polish_local_optimization(
     )  # fmt: skip
 
 
+def multi_scale_cost(F: np.ndarray, data: Correspondences, truncations: np.ndarray) -> np.ndarray:
+    """sum over t of C_t(F) / t^2, C_t the MSAC cost sum_i min(e_i^2, t^2) (px^2), for (M, 3, 3)
+    models F and (T,) truncations t (px) -> (M,).
+
+    Each term is the share of a match's error budget it uses at one scale (1 per match beyond
+    t), so no scale dominates: a model that fits the true matches tightly and one that fits
+    more matches loosely are weighed at every scale between the tightest truncation and the
+    threshold (a sum over noise levels in the spirit of MAGSAC's marginalisation).
+    """
+    models = np.ascontiguousarray(F, dtype=np.float64)
+    total = np.zeros(models.shape[0])
+    for t in np.asarray(truncations, dtype=np.float64):
+        cost, _ = msac_kernel(models, data.X1, data.X2, float(t))
+        total += cost / (t * t)
+    return total
+
+
 def polish_final(
     F: np.ndarray, data: Correspondences, threshold: float, off_plane: np.ndarray | None = None
 ) -> np.ndarray:
-    """The final model's Levenberg-Marquardt step (the ``"lm"`` scheme's last refinement).
+    """The final model's Levenberg-Marquardt steps (the ``"lm"`` scheme's last refinement).
 
-    On noisy matches (:func:`noise_truncation` of F at least ``LM_MODEL_START`` x ``threshold``,
-    as for the second start of :func:`polish_local_optimization`) F is refined by
-    :func:`refine_truncated` at ``FINAL_TRUNCATION`` x ``threshold``, and the refined model
-    replaces F if it keeps at least as many matches within ``threshold``, and as many of the
-    ``off_plane`` ones (a fit that follows wrong matches lying within the wider truncation, e.g.
-    a repetitive row matched one period off, loses true ones at the threshold; one that trades
-    parallax for a dominant plane's matches heads for a plane-degenerate F); on precise
-    matches F is returned as it is.
+    1. Noisy matches (:func:`noise_truncation` of F at least ``LM_MODEL_START`` x ``threshold``,
+       as for the second start of :func:`polish_local_optimization`): F is refined by
+       :func:`refine_truncated` at ``FINAL_TRUNCATION`` x ``threshold``, and the refined model
+       replaces F if it keeps at least as many matches within ``threshold``.
+    2. Wide thresholds (``WIDE_TRUNCATION`` x ``threshold`` at least ``WIDE_MIN_PX``): F is
+       refined at that truncation and replaced if the refined model's
+       :func:`multi_scale_cost` at ``WIDE_SCALES`` x ``threshold`` is lower. A threshold far
+       above the matches' noise lets the wrong matches within it pull a fit truncated there
+       (pairs with few true matches); the tighter fit follows the true ones.
+
+    The first replacement also needs as many of the ``off_plane`` matches within ``threshold``
+    (a fit that trades parallax for a dominant plane's matches heads for a plane-degenerate F;
+    one that follows wrong matches lying within the wider truncation, e.g. a repetitive row
+    matched one period off, loses true ones at the threshold). The second does not: at a wide
+    threshold the matches a tighter fit leaves out are mostly the wrong ones it is meant to
+    leave out, off the plane or not.
 
     Args:
         F: (3, 3) the final model, px. data: all matches. threshold: px, the inlier threshold.
@@ -423,14 +456,18 @@ def polish_final(
     Returns:
         (3, 3) F in px: refined (rank 2, unit norm) or ``F`` itself.
     """
-    if noise_truncation(F, data, threshold) < LM_MODEL_START * threshold:
-        return F
-    G = refine_truncated(F, data, FINAL_TRUNCATION * threshold)
-    d = data.distances(np.ascontiguousarray(np.stack([F, G]))) < threshold
-    if np.count_nonzero(d[1]) < np.count_nonzero(d[0]):
-        return F
-    if off_plane is not None and np.count_nonzero(d[1] & off_plane) < np.count_nonzero(
-        d[0] & off_plane
-    ):
-        return F
-    return G
+    if noise_truncation(F, data, threshold) >= LM_MODEL_START * threshold:
+        G = refine_truncated(F, data, FINAL_TRUNCATION * threshold)
+        d = data.distances(np.ascontiguousarray(np.stack([F, G]))) < threshold
+        kept = np.count_nonzero(d[1]) >= np.count_nonzero(d[0])
+        if kept and off_plane is not None:
+            kept = np.count_nonzero(d[1] & off_plane) >= np.count_nonzero(d[0] & off_plane)
+        if kept:
+            F = G
+    tight = WIDE_TRUNCATION * threshold
+    if tight >= WIDE_MIN_PX:
+        G = refine_truncated(F, data, tight)
+        cost = multi_scale_cost(np.stack([F, G]), data, np.asarray(WIDE_SCALES) * threshold)
+        if np.isfinite(G).all() and cost[1] < cost[0]:
+            F = G
+    return F

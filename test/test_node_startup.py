@@ -9,6 +9,10 @@ import sys
 import time
 
 import pytest
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+
+from sepfm_ros.ros.node_main import spin_until_shutdown
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
@@ -61,3 +65,40 @@ def test_node_command_imports_no_bag_or_progress_bar_modules():
     )
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, f"the node imports {r.stdout.strip()}\n{r.stderr[-2000:]}"
+
+
+class _ShutDuringSpin(SingleThreadedExecutor):
+    """An executor whose context is shut down (as rclpy's SIGTERM handler does) right after
+    spin checked it and before the wait set is built: the race a signal can hit."""
+
+    def spin_once(self, timeout_sec=None):
+        self.context.shutdown()
+        super().spin_once(timeout_sec)
+
+
+class _FailsWhileUp(SingleThreadedExecutor):
+    def spin_once(self, timeout_sec=None):
+        raise RuntimeError("a callback failed")
+
+
+def test_spin_ends_quietly_when_a_signal_shuts_the_context_mid_spin():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    executor = _ShutDuringSpin(context=context)
+    with pytest.raises(Exception) as raised:  # what the race does to a bare spin
+        executor.spin()
+    assert not context.ok() and "context is not valid" in str(raised.value)
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    spin_until_shutdown(_ShutDuringSpin(context=context))  # returns: the shutdown
+    assert not context.ok()
+
+
+def test_spin_reraises_errors_while_the_context_is_up():
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    try:
+        with pytest.raises(RuntimeError, match="a callback failed"):
+            spin_until_shutdown(_FailsWhileUp(context=context))
+    finally:
+        context.try_shutdown()

@@ -14,7 +14,7 @@ import threading
 
 import cv2
 import rclpy
-from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
+from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from threadpoolctl import threadpool_limits
 
 from sepfm_ros.pipeline.compiled import warm_up
@@ -69,6 +69,24 @@ def warm_up_interruptibly() -> float | None:
     return done.get("s", 0.0)
 
 
+def spin_until_shutdown(executor: Executor) -> None:
+    """``executor.spin()`` until SIGINT or SIGTERM shuts its context down.
+
+    rclpy's signal handler shuts the context down from another point in the program: when that
+    happens after spin checked the context and before it built its wait set, building the wait
+    set fails on the shut context (``RCLError``). An error raised once the context is shut is
+    that shutdown and ends the spin quietly; one raised while the context is still up is
+    re-raised.
+    """
+    try:
+        executor.spin()
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    except Exception:
+        if executor.context.ok():
+            raise
+
+
 def main(argv: list[str]) -> int:
     """Run the node until SIGINT/SIGTERM; returns the process exit code."""
     from rclpy.utilities import remove_ros_args
@@ -105,10 +123,7 @@ def main(argv: list[str]) -> int:
         )
         executor = SingleThreadedExecutor()
         executor.add_node(node)
-        try:
-            executor.spin()
-        except (KeyboardInterrupt, ExternalShutdownException):
-            pass
+        spin_until_shutdown(executor)
     finally:
         if node is not None:
             node.shutdown()

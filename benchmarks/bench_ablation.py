@@ -67,6 +67,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "plain least-squares LO (Sampson refits and LM off)": (None, {"lo": "plain"}),
     "LO fits on all matches (lo_matches 0; default: at most 600)": (None, {"lo_matches": 0}),
     "fixed-point check off": (None, {"fixed_point_check": 0.0}),
+    "stage 2's unfixed arm off (unfixed_share 0)": (None, {"unfixed_share": 0.0}),
     "inner sampling of the final model off": (None, {"inner_samples": 0}),
     "oriented epipolar constraint on": (None, {"oriented": True}),
     "plane check on all 300 candidates (adaptive off)": (None, {"plane_check_adaptive": False}),

@@ -30,6 +30,9 @@ class Estimate:
         samples: minimal samples drawn, every stage together (stage 1's 3-point samples,
             stage 2, fallback); at most the ``max_samples`` option.
         fallback: True when standard RANSAC ran because no usable line pair was found.
+        unfixed_lead: True when stage 2's best model came from its arm without fixed points
+            (``EstimatorOptions.unfixed_share``), not from a line pair's; the line-pair fields
+            are then None.
         periodic_line_pairs: line pairs whose H_e support was found periodic (a row of equally
             spaced points, ``EstimatorOptions.periodic_check``) and whose arms joined stage 2
             after the others.
@@ -52,6 +55,7 @@ class Estimate:
     control_points: tuple[np.ndarray, np.ndarray] | None = None
     samples: int = 0
     fallback: bool = False
+    unfixed_lead: bool = False
     periodic_line_pairs: int = 0
     status: str = "ok"
     method: str = ""

@@ -206,6 +206,13 @@ class EstimatorOptions:
             model has at least ``race_pool_ratio`` of the best model's inliers among its own
             (``RaceOptions.pool_rule`` / ``pool_ratio``; docs/benchmarks.md, race and line
             thresholds section).
+        unfixed_share: when fewer than ``max_line_pairs`` line pairs give a stage-2 arm, an arm
+            without fixed points (standard RANSAC's samples, k = 7 or 8) joins the race after
+            them and draws at most this share of stage 2's samples while another arm is
+            active. Its samples count toward the pooled stop at F(k, r) / F(7 or 8, r) of a
+            fixed arm's. It hedges a fixed triple that holds a wrong match near its line: with
+            only one short line pair, stage 2 can converge on a model that passes through that
+            match (docs/design.md, unfixed arm). 0: off.
     """
 
     max_samples: int = 10000
@@ -235,6 +242,7 @@ class EstimatorOptions:
     oriented: bool = False
     race_pool: str = "support"
     race_pool_ratio: float = 0.8
+    unfixed_share: float = 0.25
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -254,6 +262,8 @@ class EstimatorOptions:
                 raise ValueError(f"option {name} must be >= {low}, got {getattr(self, name)}")
         if self.fixed_point_check < 0:
             raise ValueError(f"option fixed_point_check must be >= 0, got {self.fixed_point_check}")
+        if not 0.0 <= self.unfixed_share < 1.0:
+            raise ValueError(f"option unfixed_share must be in [0, 1), got {self.unfixed_share}")
         if self.lo_matches != 0 and self.lo_matches < 16:
             raise ValueError(f"option lo_matches must be 0 (all) or >= 16, got {self.lo_matches}")
         for name in ("line_distance", "line_threshold", "sample_plane_factor", "race_pool_ratio"):
@@ -575,12 +585,14 @@ class _Problem:
             return 1
         return min(ransac_trials(k, 0.5, self.confidence), self.opt.max_samples)
 
-    def whole(self) -> FundamentalProblem:
-        """The problem over all matches (no fixed points), the ambiguous ones last in its pool."""
+    def whole(self, race_share: float = 1.0) -> FundamentalProblem:
+        """The problem over all matches (no fixed points), the ambiguous ones last in its pool;
+        ``race_share``: its most share of a race's samples (``FundamentalProblem``)."""
         pool = None if self.ambiguous is None else self.pool_order(np.ones(len(self.data), bool))
         return FundamentalProblem(
             self.data, self.solver, self.threshold, self.scoring, pool=pool, scale=self.scale,
             lo=self.opt.lo, lo_data=self.lo_data, oriented=self.opt.oriented,
+            race_share=race_share,
         )  # fmt: skip
 
     def standard(self, initial: tuple[Any, float, int] | None = None) -> RansacResult:
@@ -605,7 +617,8 @@ class _Problem:
 def _separable(
     problem: _Problem, est: Estimate, size1: tuple[float, float], size2: tuple[float, float]
 ) -> RansacResult:
-    """The separable method: line pairs, stage 1 on each as its arm joins the stage-2 race, and
+    """The separable method: line pairs, stage 1 on each as its arm joins the stage-2 race (with
+    an arm without fixed points when the line pairs run out, option ``unfixed_share``), and
     standard RANSAC from the best model so far when no line pair helps or stage 2 hits its cap
     (a wrong fixed triple is the usual cause). Fills ``est``'s line-pair fields and timings."""
     d, opt = problem.data, problem.opt
@@ -615,7 +628,7 @@ def _separable(
     t1 = time.perf_counter()
     est.timings_ms["lines"] = 1e3 * (t1 - t0)
     scales = (working_scale(size1, lopts.width), working_scale(size2, lopts.width))
-    fits: list[LineHomographyFit] = []
+    fits: list[LineHomographyFit | None] = []  # per stage-2 arm; None: the unfixed arm
     stage1_s = [0.0]
 
     def stage2_arms():
@@ -646,6 +659,9 @@ def _separable(
                 return
             fits.append(fit)
             yield arm
+        if opt.unfixed_share > 0 and fits and len(fits) < opt.max_line_pairs:
+            fits.append(None)
+            yield problem.whole(race_share=opt.unfixed_share)
 
     result = run_ransac(
         stage2_arms(), problem.rng, problem.confidence, opt.max_samples,
@@ -655,7 +671,9 @@ def _separable(
         min_samples=problem.min_samples(problem.model_points - 3),
     )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
-    if fits and result.leader >= 0:
+    if fits and result.leader >= 0 and fits[result.leader] is None:
+        est.unfixed_lead = True
+    elif fits and result.leader >= 0:
         best = fits[result.leader]
         est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
         est.line_inliers = best.inliers

@@ -289,6 +289,8 @@ class FundamentalProblem:
             (:meth:`fixed_inliers`).
         oriented: drop the models for which the sample's own matches break the oriented
             epipolar constraint (``solvers.orientation``), before they are scored.
+        race_share: in a race (``ransac.run_ransac``), the most share of all samples this arm
+            draws while an arm without a share is active (1: no limit).
     """
 
     def __init__(
@@ -306,6 +308,7 @@ class FundamentalProblem:
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
         oriented: bool = False,
+        race_share: float = 1.0,
     ) -> None:
         if lo not in LO_SCHEMES:
             raise ValueError(
@@ -332,6 +335,7 @@ class FundamentalProblem:
         )
         self.fixed_tol = float(fixed_tol)
         self.oriented = bool(oriented)
+        self.race_share = float(race_share)
         self.sample_size = (7 if solver == "seven" else 8) - f
         self.pool = np.arange(len(data)) if pool is None else np.asarray(pool, dtype=np.int64)
         self.n = len(data)

@@ -99,6 +99,9 @@ class Problem(Protocol):
     # model so far (LMedS: matches within its robust scale). With it an arm's support is the
     # count of its lowest-cost model, re-counted whenever the best model improves, instead of
     # the largest count any of its models had.
+    # Optional: ``race_share`` (float < 1), the most of all samples the arm may draw while an
+    # arm without a share is active (a hedge that runs beside the others at a fraction of
+    # their pace, e.g. stage 2's arm without fixed points).
 
 
 @dataclass
@@ -374,6 +377,7 @@ class _Arm:
     top_cost: float = np.inf
     overlap: tuple[Any, Any, float] | None = None  #: (its model, best model, share) for "model"
     consistent: tuple[Any, bool] | None = None  #: (best model, its fixed points are inliers)
+    share: float = 1.0  #: most of all samples it may draw (its problem's ``race_share``)
 
 
 class _Run:
@@ -420,6 +424,7 @@ class _Run:
         if problem is None:
             return False
         arm = _Arm(problem)
+        arm.share = float(getattr(problem, "race_share", 1.0))
         opt = self.sampling
         if opt.prosac:
             growth = opt.prosac_growth or self.max_samples
@@ -510,11 +515,20 @@ class _Run:
             arm.overlap = (arm.top_model, self.best_model, share)
         return arm.overlap[2] >= self.race.pool_ratio
 
-    def pooled_samples(self) -> int:
-        """Samples of the arms that pool with the best model (0 before there is one)."""
+    def pooled_samples(self, a: int) -> float:
+        """Samples drawn by the arms that pool with the best model, in samples of arm ``a``
+        (0 before there is one): an arm b whose samples are all-inlier at another rate counts
+        n_b F(k_a, r) / F(k_b, r), so the pooled stop is the chance that none of the pooled
+        arms drew an all-inlier sample, prod_b (1 - w_b)^n_b <= 1 - p."""
         if self.leader < 0:
-            return 0
-        return sum(arm.samples for a, arm in enumerate(self.arms) if self.pools(a))
+            return 0.0
+        need = self.needed(a)
+        done = 0.0
+        for b, arm in enumerate(self.arms):
+            if arm.samples and self.pools(b):
+                nb = need if b == a else self.needed(b)
+                done += arm.samples if nb == need else arm.samples * need / nb
+        return done
 
     def needed(self, a: int) -> int:
         """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``."""
@@ -545,14 +559,23 @@ class _Run:
         pace = max(1, max(self.arms[a].samples for a in self.active))
         for a in list(self.active):
             need = self.needed(a)
-            done = self.pooled_samples()
+            done = self.pooled_samples(a)
             if self.leader >= 0 and done >= need:
                 break
             # batches grow 1, 1, 2, 4, ... so the sequential stopping rule is barely overshot
-            b = max(1, min(need - done, self.batch, pace))
-            b = min(b, self.budget.left())
+            b = max(1, min(int(np.ceil(need - done)), self.batch, pace))
+            b = min(b, self.budget.left(), self.share_left(a))
             if b > 0:
                 self.sample_arm(a, b)
+
+    def share_left(self, a: int) -> int:
+        """Samples arm ``a`` may still draw under its ``share`` of all samples (no limit for
+        arms without one, or when no arm without a share is active)."""
+        arm = self.arms[a]
+        if arm.share >= 1.0 or all(self.arms[c].share < 1.0 for c in self.active):
+            return self.max_samples
+        others = self.total - arm.samples
+        return int(arm.share / (1.0 - arm.share) * others) - arm.samples
 
     def sample_arm(self, a: int, b: int) -> None:
         """Draw, solve and score ``b`` samples of arm ``a``, then optimise locally.
@@ -614,7 +637,7 @@ class _Run:
 
     def converged(self) -> bool:
         """The arms that agree with the best model drew F(k, r) samples together."""
-        return self.leader >= 0 and self.pooled_samples() >= self.needed(self.leader)
+        return self.leader >= 0 and self.pooled_samples(self.leader) >= self.needed(self.leader)
 
     def unfixed_affordable(self, a: int) -> bool:
         """F(p, r) samples of p points (the ``model_points`` of arm ``a``'s problem, else its
@@ -719,7 +742,9 @@ def run_ransac(
     passes ``race.pool_rule`` (by default: its own best support is at least ``race.pool_ratio``
     of the best model's): arms whose fixed points are all inliers draw an all-inlier sample at
     the same rate w^k, so their samples pool (several good line pairs racing would otherwise
-    each draw F(k, r) samples); a lagging arm's do not count.
+    each draw F(k, r) samples); a lagging arm's do not count. An arm of another sample size k'
+    counts each of its samples as F(k, r) / F(k', r) of the leader's (a seven-point sample is
+    worth far less than a four-point one with three fixed inliers).
 
     Args:
         arms: problems to sample (a list or a lazy iterator); all score against the same data.

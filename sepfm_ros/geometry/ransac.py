@@ -413,6 +413,7 @@ class _Run:
         self.leader = -1
         self._best_inliers: tuple[Any, np.ndarray] | None = None  # (best model, its inliers)
         self.extra_lo = 0
+        self._needed: dict[tuple, int] = {}  # memo of needed()
         self.hypotheses = 0
         self.total = 0
         self.n_join = 0
@@ -531,8 +532,16 @@ class _Run:
         return done
 
     def needed(self, a: int) -> int:
-        """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``."""
+        """F(k, r) of arm ``a`` at the best model's inlier ratio, at least ``min_samples``
+        (memoised: it only changes with the best count and the SPRT's A)."""
         p = self.arms[a].problem
+        key = (p.sample_size, p.n, self.best_count, None if self.sprt is None else self.sprt.A)
+        need = self._needed.get(key)
+        if need is None:
+            need = self._needed[key] = self._needed_now(p)
+        return need
+
+    def _needed_now(self, p: Problem) -> int:
         count = max(self.best_count, 0)
         if self.sprt is not None and np.isfinite(self.sprt.A) and p.n > 0:
             # SPRT rejects a good model with probability <= 1 / A: an all-inlier sample

@@ -15,8 +15,18 @@ from rclpy.executors import SingleThreadedExecutor
 from sepfm_ros.ros.node_main import spin_until_shutdown
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
-def test_signal_during_kernel_compilation_exits_cleanly(sig, tmp_path, ros_domain_id):
+def _ignore_sigint() -> None:
+    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
+    children."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize(
+    "sig, background",
+    [(signal.SIGINT, False), (signal.SIGTERM, False), (signal.SIGINT, True)],
+    ids=["SIGINT", "SIGTERM", "SIGINT-background"],
+)
+def test_signal_during_kernel_compilation_exits_cleanly(sig, background, tmp_path, ros_domain_id):
     cache = tmp_path / "numba"  # an empty kernel cache: the node has to compile (tens of seconds)
     cache.mkdir()
     env = dict(os.environ, NUMBA_CACHE_DIR=str(cache))
@@ -26,6 +36,7 @@ def test_signal_during_kernel_compilation_exits_cleanly(sig, tmp_path, ros_domai
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
+        preexec_fn=_ignore_sigint if background else None,
     )
     try:
         deadline = time.monotonic() + 120.0

@@ -47,17 +47,25 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
+#: the signals that stop the node
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
 def warm_up_interruptibly() -> float | None:
     """:func:`warm_up` in a thread, so SIGINT / SIGTERM stop the node while kernels compile.
 
     numba compiles on: a KeyboardInterrupt raised in the compiling thread is lost. Returns the
     seconds spent, or None when interrupted (the thread is left to the process's exit).
+
+    Both signals get a handler here, SIGINT too: a process started in the background by a
+    shell inherits SIGINT ignored, and Python then installs no handler of its own (rclpy's
+    handlers, installed later, take SIGINT whatever it inherited).
     """
     done: dict[str, float] = {}
     thread = threading.Thread(
         target=lambda: done.update(s=warm_up()), name="kernel-warm-up", daemon=True
     )
-    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    previous = {s: signal.signal(s, raise_keyboard_interrupt) for s in STOP_SIGNALS}
     try:
         thread.start()
         while thread.is_alive():
@@ -65,7 +73,8 @@ def warm_up_interruptibly() -> float | None:
     except KeyboardInterrupt:
         return None
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
     return done.get("s", 0.0)
 
 

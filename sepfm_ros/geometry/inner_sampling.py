@@ -23,7 +23,7 @@ from sepfm_ros.geometry.epipolar import msac_cost, msac_kernel
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.nonlinear import noise_truncation
 from sepfm_ros.geometry.ransac import draw_samples
-from sepfm_ros.geometry.refine import _normalized_model, _refit_kernel
+from sepfm_ros.geometry.refine import normalized_model, refit_kernel
 
 #: Matches per inner sample: twice the seven of a minimal sample.
 INNER_SAMPLE_SIZE = 14
@@ -74,11 +74,11 @@ def _best_inner_fit(F, x1, x2, X1, X2, T1, T2, drawn, threshold):
     with the lowest MSAC cost at ``threshold`` over all matches (X1, X2: (>=2, N) px; x1, x2:
     (N, 2) normalised). Each fit starts its inverse iteration from F (the samples are F's
     inliers); a fit's scoring stops once its partial cost passes the best so far."""
-    start = _normalized_model(F, T1, T2)
+    start = normalized_model(F, T1, T2)
     best = F.copy()
     best_cost = np.inf
     for s in range(drawn.shape[0]):
-        G = _refit_kernel(x1, x2, drawn[s], 0, T1, T2, start)
+        G = refit_kernel(x1, x2, drawn[s], 0, T1, T2, start)
         c, _ = msac_cost(G, X1, X2, threshold, best_cost)
         if c < best_cost:
             best_cost = c

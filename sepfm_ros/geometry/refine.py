@@ -101,7 +101,7 @@ def _solve_gram(G: np.ndarray, start: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _normalized_model(F: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
+def normalized_model(F: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarray:
     """(9,) F_n = T2^-T F T1^-1 of a pixel F (3, 3), row-major (the inverse of
     ``denormalize``): the model in the normalised coordinates the refits solve in."""
     return (np.linalg.inv(T2).T @ F @ np.linalg.inv(T1)).ravel().copy()
@@ -126,8 +126,12 @@ def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.nd
 
 
 @numba.njit(cache=True, nogil=True)
-def _refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
+def refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
     """Normalised eight-point least squares on rows idx (+ Sampson IRLS); F in px, unit norm.
+
+    x1, x2: (N, 2) normalised coordinates (``Correspondences.x1`` / ``x2``); idx: (K,) int
+    rows to fit; T1, T2: (3, 3) their normalising transforms. Compiled, for callers that fit
+    many index sets in one kernel (:func:`iterative_refit`, inner sampling).
 
     start: (9,) normalised model the first solve starts from (each IRLS solve starts from the
     previous one); zeros for none (a full eigen-decomposition, see
@@ -149,7 +153,7 @@ def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_
     t2 = threshold * threshold
     # distances beyond every factor's threshold (and the cost's) only need to be known as such
     cap = max(factors.max(), 1.0) * threshold
-    start = _normalized_model(F, T1, T2)  # each refit starts from the current model
+    start = normalized_model(F, T1, T2)  # each refit starts from the current model
     d = distances_within_kernel(F.reshape(1, 3, 3), X1, X2, cap)[0]
     best_cost = np.minimum(d * d, t2).sum()
     out = np.empty((factors.shape[0], 3, 3))
@@ -166,7 +170,7 @@ def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_
             continue
         previous = inl
         have_previous = True
-        G = _refit_kernel(x1, x2, np.flatnonzero(inl), irls_iterations, T1, T2, start)
+        G = refit_kernel(x1, x2, np.flatnonzero(inl), irls_iterations, T1, T2, start)
         dG = distances_within_kernel(G.reshape(1, 3, 3), X1, X2, cap)[0]
         c = np.minimum(dG * dG, t2).sum()
         for a in range(3):
@@ -176,7 +180,7 @@ def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_
         if c < best_cost:  # continue from the better model
             best_cost = c
             d = dG
-            start = _normalized_model(G, T1, T2)
+            start = normalized_model(G, T1, T2)
     return out[:n_out]
 
 
@@ -190,7 +194,7 @@ def refit(data: Correspondences, inliers: np.ndarray, irls_iterations: int = 0) 
         (3, 3) rank-2 F in pixels, unit Frobenius norm.
     """
     idx = np.flatnonzero(inliers)
-    return _refit_kernel(data.x1, data.x2, idx, int(irls_iterations), data.T1, data.T2, np.zeros(9))
+    return refit_kernel(data.x1, data.x2, idx, int(irls_iterations), data.T1, data.T2, np.zeros(9))
 
 
 def fit_least_squares(pts1: np.ndarray, pts2: np.ndarray, irls_iterations: int = 0) -> np.ndarray:

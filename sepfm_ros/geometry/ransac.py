@@ -527,7 +527,7 @@ class _Run:
         done = 0.0
         for b, arm in enumerate(self.arms):
             if arm.samples and self.pools(b):
-                nb = need if b == a else self.needed(b)
+                nb = self.needed(b)
                 done += arm.samples if nb == need else arm.samples * need / nb
         return done
 

@@ -8,7 +8,12 @@ from pathlib import Path
 
 import numpy as np
 
+from sepfm_ros.evaluation.manifest import PairSpec, load_manifest
+from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings, PairMatches
+from sepfm_ros.evaluation.metrics import positives
 from sepfm_ros.geometry import fundamental_from_cameras, symmetric_epipolar_distance
+
+REPO_ROOT = Path(__file__).resolve().parent.parent
 
 GT_INLIER_PX = 1.0  # a match is a GT inlier when its symmetric epipolar distance under GT F < 1 px
 
@@ -34,3 +39,14 @@ def median_gt_inlier_error(
         return float("inf"), 0
     errors = symmetric_epipolar_distance(F, pts_a[gt_inliers], pts_b[gt_inliers])
     return float(np.median(errors)), n
+
+
+def manifest_pair(
+    data: Path, pair_id: str, ratio: float
+) -> tuple[PairSpec, PairMatches, np.ndarray]:
+    """The pair ``pair_id`` of ``data``/pairs.json, its SIFT matches at ``ratio`` (cached in
+    .cache/matches) and their GT positives, (N,) bool."""
+    pairs, _ = load_manifest(data / "pairs.json")
+    pair = next(p for p in pairs if p.pair_id == pair_id)
+    m = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", ratio)).matches(pair)
+    return pair, m, positives(pair.F_gt, m.pts_a, m.pts_b)

@@ -4,22 +4,17 @@ for it, so its samples stop counting toward F(k, r) and the arm is dropped."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from ground_truth import manifest_pair
 
-from sepfm_ros.evaluation.manifest import load_manifest
-from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
-from sepfm_ros.evaluation.metrics import positives, run_metrics
+from sepfm_ros.evaluation.metrics import run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.ransac import SamplingOptions, run_ransac
 from sepfm_ros.geometry.synthetic import make_pair
-
-REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def _scene(seed: int = 3):
@@ -120,10 +115,7 @@ def test_kitti_pair_whose_extreme_line_match_is_wrong(shared_data):
     # holds a match 8.6 px from the GT F (an H_e inlier at the end of the line: near the line,
     # wrong across it). Without the check sep4 stopped on a basin of about 390 inliers (F-score
     # 0.80-0.83) on seeds 1-3; the 7-point baseline finds about 515 every time.
-    pairs, _ = load_manifest(shared_data / "pairs.json")
-    pair = next(p for p in pairs if p.pair_id == "kitti_seq2/left/000006~left/000007")
-    m = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", 0.95)).matches(pair)
-    pos = positives(pair.F_gt, m.pts_a, m.pts_b)
+    _, m, pos = manifest_pair(shared_data, "kitti_seq2/left/000006~left/000007", 0.95)
     # Inner sampling of the final model (on by default) also leaves that basin; it is off here
     # so the check is measured alone, and then on without the check.
     f_score = {}

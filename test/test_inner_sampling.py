@@ -4,13 +4,10 @@ result is kept only if it is no worse at the threshold and at the noise truncati
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from ground_truth import manifest_pair
 
-from sepfm_ros.evaluation.manifest import load_manifest
-from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.correspondences import Correspondences
@@ -20,8 +17,6 @@ from sepfm_ros.geometry.inner_sampling import inner_sampling
 from sepfm_ros.geometry.nonlinear import noise_truncation
 from sepfm_ros.geometry.refine import fit_least_squares
 from sepfm_ros.geometry.synthetic import make_pair
-
-REPO_ROOT = Path(__file__).resolve().parent.parent
 
 
 def _perturbed_start(seed: int):
@@ -100,8 +95,6 @@ def test_real_pairs_at_half_outliers(shared_data):
     # Three shared pairs (SIFT ratio 0.8) with wrong matches added to 50 %: sep4 stops after
     # a few hundred samples, and on some seeds in a worse basin (F-score 0.90-0.97); inner
     # sampling takes it to the basin ransac7's thousand samples find (0.98-0.99).
-    pairs, _ = load_manifest(shared_data / "pairs.json")
-    cache = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", 0.8))
     ids = (
         "kitti_seq2/left/000036~left/000037",
         "kitti_seq2/left/000039~left/000041",
@@ -109,10 +102,9 @@ def test_real_pairs_at_half_outliers(shared_data):
     )
     f_score: dict[int, list[float]] = {20: [], 0: []}
     for pid in ids:
-        pair = next(p for p in pairs if p.pair_id == pid)
-        m = cache.matches(pair)
+        pair, m, pos0 = manifest_pair(shared_data, pid, 0.8)
         rng = np.random.default_rng(7)
-        a, b = _with_outliers(m.pts_a, m.pts_b, positives(pair.F_gt, m.pts_a, m.pts_b), 0.5, rng)
+        a, b = _with_outliers(m.pts_a, m.pts_b, pos0, 0.5, rng)
         pos = positives(pair.F_gt, a, b)
         for samples in (20, 0):
             for seed in range(6):

@@ -4,21 +4,17 @@ samples count toward the pooled stop at their own all-inlier rate."""
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import numpy as np
 import pytest
+from ground_truth import manifest_pair
 
-from sepfm_ros.evaluation.manifest import load_manifest
-from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
-from sepfm_ros.evaluation.metrics import positives, run_metrics
+from sepfm_ros.evaluation.metrics import run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
 from sepfm_ros.geometry.ransac import RaceOptions, ransac_trials, run_ransac
 from sepfm_ros.geometry.synthetic import make_pair
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
 #: 120 true matches among 180: F(5, r) is about 30 samples and F(8, r) about 190
 SCENE = make_pair(n_inliers=120, n_outliers=60, n_lines=2, noise=0.3, seed=5)
 DATA = Correspondences.from_pixels(SCENE.pts1, SCENE.pts2)
@@ -99,10 +95,7 @@ def test_one_short_line_pair_with_a_wrong_match_in_its_triple(shared_data_lines)
     # Herz-Jesu-P8 0001 -> 0005 at SIFT ratio 0.75: 76 matches, 35 true. The only line pair is
     # 140 px long with 6 matches; on seeds 0-2 its triple holds a match 4.7 px from the GT F at
     # one end of the line, and stage 2 alone converges on a model through it with 20-23 inliers.
-    pairs, _ = load_manifest(shared_data_lines / "pairs.json")
-    pair = next(p for p in pairs if p.pair_id == "Herz-Jesu-P8/0001~0005")
-    m = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", 0.75)).matches(pair)
-    pos = positives(pair.F_gt, m.pts_a, m.pts_b)
+    _, m, pos = manifest_pair(shared_data_lines, "Herz-Jesu-P8/0001~0005", 0.75)
     result = {}
     for share in (0.25, 0.0):
         for seed in range(3):

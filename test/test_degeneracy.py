@@ -17,6 +17,8 @@ from sepfm_ros.geometry.degeneracy import (
     parallax_models,
     plane_and_parallax,
     random_pairs,
+    robust_homography,
+    transfer_error,
 )
 from sepfm_ros.geometry.epipolar import fundamental_from_cameras
 from sepfm_ros.geometry.synthetic import look_at_camera
@@ -195,3 +197,25 @@ def test_plane_check_keeps_a_right_f_whose_off_plane_support_is_small(seed):
     assert check.planar and check.candidates > 0  # challenged: its support is not far above chance
     assert not check.replaced and check.reason is None
     assert np.median(symmetric_epipolar_distance(check.F, off1, off2)) < 1.0
+
+
+def test_robust_homography_finds_the_plane_and_follows_its_seed():
+    """The shared RHO search: on 60 % plane matches among random ones it returns a homography
+    that holds at least that share within the tolerance; the same seed gives the same H, and a
+    set with no plane at that share gives a homography holding far less of it or None."""
+    rng = np.random.default_rng(3)
+    H_true = np.array([[1.05, 0.02, 12.0], [-0.01, 0.98, -7.0], [1e-5, -2e-5, 1.0]])
+    p1 = rng.uniform(0, 600, (200, 2))
+    p2 = cv2.perspectiveTransform(p1[None], H_true)[0] + rng.normal(0, 0.3, (200, 2))
+    p2[120:] = rng.uniform(0, 600, (80, 2))  # 40 % random matches
+    H = robust_homography(p1, p2, 2.0, 0.5, seed=11, max_trials=500)
+    assert H is not None
+    on = transfer_error(H, p1, p2) < 2.0
+    assert np.count_nonzero(on) >= 0.6 * 200 - 5
+    assert np.count_nonzero(on[120:]) <= 3  # the random matches stay off it
+    again = robust_homography(p1, p2, 2.0, 0.5, seed=11, max_trials=500)
+    np.testing.assert_array_equal(H, again)
+    noise = rng.uniform(0, 600, (200, 2))
+    H_none = robust_homography(p1, noise, 2.0, 0.5, seed=11, max_trials=500)
+    if H_none is not None:
+        assert np.count_nonzero(transfer_error(H_none, p1, noise) < 2.0) < 0.2 * 200

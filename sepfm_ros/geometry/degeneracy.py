@@ -88,6 +88,24 @@ class PlaneCheck:
     accepted: bool = False
 
 
+def robust_homography(
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    tol: float,
+    min_share: float,
+    seed: int,
+    max_trials: int,
+) -> np.ndarray | None:
+    """A homography that holds ``min_share`` of the (K >= 4, 2) matches pts1 -> pts2 within
+    ``tol`` px: OpenCV's RHO, its RNG seeded with ``seed``, drawing F(4, 1 - min_share) samples
+    at confidence 0.995 (at most ``max_trials``). Returns (3, 3) H, image 1 -> image 2, or None
+    when OpenCV finds none."""
+    cv2.setRNGSeed(int(seed))
+    iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=max_trials)
+    H, _ = cv2.findHomography(pts1, pts2, cv2.RHO, tol, maxIters=iters, confidence=0.995)
+    return H
+
+
 def transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.ndarray:
     """(N,) ||H x1 - x2|| in px (inf where H maps to infinity)."""
     return _transfer_error(
@@ -187,16 +205,15 @@ def plane_and_parallax(
     if np.count_nonzero(inl) < 8:
         return out
     # a robust H on F's inliers (the question is whether one plane holds plane_share of them;
-    # matches F rejected would only slow the search down), seeded via OpenCV's RNG; F(4, 1 -
-    # plane_share) samples find such a plane with confidence 0.995 (83 at 0.5) where a
-    # non-planar scene would run to 500 (matches along one line, whose 4-point samples are
-    # degenerate for H, are flagged by the estimator's line-band check instead)
-    cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    iters = ransac_trials(4, 1.0 - plane_share, 0.995, max_trials=500)
+    # matches F rejected would only slow the search down); F(4, 1 - plane_share) samples find
+    # such a plane with confidence 0.995 (83 at 0.5) where a non-planar scene would run to 500
+    # (matches along one line, whose 4-point samples are degenerate for H, are flagged by the
+    # estimator's line-band check instead)
+    seed = int(rng.integers(0, 2**31 - 1))
     fit = np.flatnonzero(inl)
     if len(fit) > plane_points:  # a random subset holds the plane's share as well
         fit = np.sort(rng.choice(fit, plane_points, replace=False))
-    H, _ = cv2.findHomography(pts1[fit], pts2[fit], cv2.RHO, tol, maxIters=iters, confidence=0.995)
+    H = robust_homography(pts1[fit], pts2[fit], tol, plane_share, seed, max_trials=500)
     if H is None:
         return out
     out.H = H

@@ -27,12 +27,10 @@ from __future__ import annotations
 
 import math
 
-import cv2
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.degeneracy import transfer_error
-from sepfm_ros.geometry.ransac import ransac_trials
+from sepfm_ros.geometry.degeneracy import robust_homography, transfer_error
 
 #: cross ratio of four consecutive points of a projective arithmetic progression
 PROGRESSION_CROSS_RATIO = 4.0 / 3.0
@@ -319,10 +317,8 @@ def shifted_plane_copy(
     n_candidates = len(idx)
     if len(idx) > max_fit:  # H2 is searched on a random subset (scored on all candidates)
         idx = np.sort(rng.choice(idx, max_fit, replace=False))
-    cv2.setRNGSeed(int(rng.integers(0, 2**31 - 1)))
-    # F(4, 1 - min_share) samples find an H2 holding min_share of the candidates (p = 0.995)
-    iters = ransac_trials(4, 1.0 - min_share, 0.995, max_trials=max_iterations)
-    H2, _ = cv2.findHomography(pts1[idx], pts2[idx], cv2.RHO, tol, maxIters=iters, confidence=0.995)
+    seed = int(rng.integers(0, 2**31 - 1))
+    H2 = robust_homography(pts1[idx], pts2[idx], tol, min_share, seed, max_iterations)
     if H2 is None:
         return None
     on2 = candidates & (transfer_error(H2, pts1, pts2) < tol)

@@ -99,3 +99,14 @@ def compiled_kernels() -> float:
 def ros_domain_id() -> int:
     """The session's ROS_DOMAIN_ID (set in ``pytest_configure``, before any rclpy.init)."""
     return int(os.environ["ROS_DOMAIN_ID"])
+
+
+@pytest.fixture(scope="module")
+def ros(ros_domain_id):
+    """One test module's rclpy context, node and background executor (``ros_helpers.Ros``).
+    Requested only by modules that skip without rclpy, so rclpy is imported here, not above."""
+    from ros_helpers import Ros
+
+    r = Ros()
+    yield r
+    r.close()

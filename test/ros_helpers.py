@@ -1,5 +1,5 @@
 """Shared helpers of the live-node tests: the node as a subprocess, a test-side rclpy client,
-and image messages. Used by test_node_live.py and test_robustness_live.py.
+stamp listeners and image messages. Used by the live-node, replay and robustness tests.
 
 Import this module only after ``pytest.importorskip("rclpy")``.
 """
@@ -24,6 +24,7 @@ from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image, PointCloud2
 from std_msgs.msg import Header
 
@@ -265,6 +266,29 @@ class Ros:
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
         self.thread.join(5.0)
+
+
+class StampListener:
+    """A test node of its own recording the header stamps (ns) of ``topics`` (name -> message
+    type) as they arrive, and /clock's times with ``clock``, spun in a thread until
+    :meth:`close`."""
+
+    def __init__(self, topics: dict[str, type], clock: bool = False) -> None:
+        self.ros = Ros()
+        self.stamps: dict[str, list[int]] = {t: [] for t in topics}
+        self.clock: list[int] = []
+        for topic, cls in topics.items():
+            got = self.stamps[topic]
+            self.ros.node.create_subscription(
+                cls, topic, lambda m, got=got: got.append(stamp_ns(m.header.stamp)), 10
+            )
+        if clock:
+            self.ros.node.create_subscription(
+                Clock, "/clock", lambda m: self.clock.append(stamp_ns(m.clock)), 10
+            )
+
+    def close(self) -> None:
+        self.ros.close()
 
 
 # --------------------------------------------------------------------------- messages

@@ -18,7 +18,7 @@ rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
-from ros_helpers import RELIABLE, Ros, header, image_msg, start_node  # noqa: E402
+from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
@@ -31,13 +31,6 @@ NODE = "sepfm_calib"
 FRAMES = [(f"kitti_seq2/left/{k:06d}.png", f"kitti_seq2/right/{k:06d}.png") for k in range(24)]
 T0 = 1_700_100_000 * 10**9
 LEVEL = {int.from_bytes(v, "little"): v for v in (DiagnosticStatus.OK, DiagnosticStatus.WARN)}
-
-
-@pytest.fixture(scope="module")
-def ros(ros_domain_id):
-    r = Ros()
-    yield r
-    r.close()
 
 
 class Outputs:

@@ -19,7 +19,7 @@ rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
-from ros_helpers import Ros, image_msg, send_pair, start_node  # noqa: E402
+from ros_helpers import image_msg, send_pair, start_node  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
 from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
@@ -29,13 +29,6 @@ DEFAULT_QOS = QoSProfile(depth=10)
 TEMPLE = [f"templeRing/templeR{k:04d}.png" for k in range(1, 21)]
 KITTI = [(f"kitti_seq2/left/{k:06d}.png", f"kitti_seq2/right/{k:06d}.png") for k in range(0, 10)]
 T0 = 1_700_000_000 * 10**9  # stamps of these tests (ns)
-
-
-@pytest.fixture(scope="module")
-def ros(ros_domain_id):
-    r = Ros()
-    yield r
-    r.close()
 
 
 @pytest.fixture(scope="module")

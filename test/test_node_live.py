@@ -21,7 +21,6 @@ rclpy = pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from ros_helpers import (  # noqa: E402
     REPO,
-    Ros,
     header,
     image_msg,
     next_stamp,
@@ -52,13 +51,6 @@ def images(shared_data):
         return cache[rel]
 
     return load
-
-
-@pytest.fixture(scope="module")
-def ros(ros_domain_id):
-    r = Ros()
-    yield r
-    r.close()
 
 
 @pytest.fixture(scope="module")

@@ -6,16 +6,17 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 
-import rclpy
-from rclpy.executors import SingleThreadedExecutor
-from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Image
+import pytest
 
-from sepfm_ros.demo import bundled_bags_dir
-from sepfm_ros.ros.bags.reader import BagReader
+pytest.importorskip("rclpy")
+
+from ros_helpers import StampListener  # noqa: E402
+from sensor_msgs.msg import Image  # noqa: E402
+
+from sepfm_ros.demo import bundled_bags_dir  # noqa: E402
+from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
 
 BAG = bundled_bags_dir() / "synthetic_stereo"  # 12 stereo frames at 2 Hz
 
@@ -26,42 +27,6 @@ def _bag_stamps(topic: str) -> list[int]:
     return [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]
 
 
-class Listener:
-    """A test node recording header stamps per topic and /clock times, spun in a thread."""
-
-    def __init__(self) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("replay_cli_test", context=self.context)
-        self.stamps: dict[str, list[int]] = {"/left/image_raw": [], "/right/image_raw": []}
-        self.clock: list[int] = []
-        for topic, got in self.stamps.items():
-            self.node.create_subscription(
-                Image,
-                topic,
-                lambda m, got=got: got.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec),
-                10,
-            )
-        self.node.create_subscription(
-            Clock, "/clock", lambda m: self.clock.append(m.clock.sec * 10**9 + m.clock.nanosec), 10
-        )
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while not self._stop.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
 def _replay(*args: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "sepfm_ros", "replay", str(BAG), "--quiet", *args],
@@ -70,7 +35,7 @@ def _replay(*args: str) -> subprocess.Popen:
 
 
 def test_rate_start_offset_topics_and_clock(ros_domain_id):
-    listener = Listener()
+    listener = StampListener({"/left/image_raw": Image, "/right/image_raw": Image}, clock=True)
     try:
         t0 = time.monotonic()
         proc = _replay("--rate", "4", "--start-offset", "2", "--topics", "/left/image_raw",
@@ -93,7 +58,7 @@ def test_rate_start_offset_topics_and_clock(ros_domain_id):
 
 
 def test_loop_repeats_until_interrupted(ros_domain_id):
-    listener = Listener()
+    listener = StampListener({"/left/image_raw": Image, "/right/image_raw": Image}, clock=True)
     try:
         proc = _replay("--loop", "--rate", "8", "--topics", "/left/image_raw",
                        "--wait-for", "/left/image_raw")  # fmt: skip

@@ -13,7 +13,6 @@ import os
 import signal
 import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
@@ -24,9 +23,8 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from robot_bags import LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag  # noqa: E402
-from ros_helpers import RELIABLE, REPO, Ros, start_node  # noqa: E402
+from ros_helpers import RELIABLE, REPO, Ros, StampListener, start_node  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
 from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
@@ -53,39 +51,6 @@ def small_frames(shared_data) -> list[tuple[np.ndarray, np.ndarray]]:
     return frames
 
 
-class Listener:
-    """Records header stamps of the robot topics as they arrive, spun in a thread."""
-
-    def __init__(self, topics: dict[str, type]) -> None:
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("replay_robot_test", context=self.context)
-        self.stamps: dict[str, list[int]] = {t: [] for t in topics}
-        for topic, cls in topics.items():
-            got = self.stamps[topic]
-            self.node.create_subscription(
-                cls,
-                topic,
-                lambda m, got=got: got.append(m.header.stamp.sec * 10**9 + m.header.stamp.nanosec),
-                10,
-            )
-        self.executor = SingleThreadedExecutor(context=self.context)
-        self.executor.add_node(self.node)
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._spin, daemon=True)
-        self._thread.start()
-
-    def _spin(self) -> None:
-        while not self._stop.is_set():
-            self.executor.spin_once(timeout_sec=0.05)
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
-
 def _replay(bag: Path, *args: str) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "sepfm_ros", "replay", str(bag), "--quiet", *args],
@@ -106,7 +71,7 @@ def _stamps(bag: Path, topic: str) -> list[int]:
 def test_replay_skips_tf_plays_the_rest_and_loops(fmt, small_frames, tmp_path, ros_domain_id):
     bag = write_robot_bag(bag_path(tmp_path, fmt), fmt, small_frames, right_lag_ns=12_000_000)
     info = "/camera/left/camera_info"
-    listener = Listener({LEFT_TOPIC: Image, RIGHT_TOPIC: Image, info: CameraInfo})
+    listener = StampListener({LEFT_TOPIC: Image, RIGHT_TOPIC: Image, info: CameraInfo})
     try:
         proc = _replay(bag, "-l", "-r", "4", "--wait-for", LEFT_TOPIC, RIGHT_TOPIC, info)
         deadline = time.monotonic() + 60
@@ -134,7 +99,7 @@ def test_replay_skips_tf_plays_the_rest_and_loops(fmt, small_frames, tmp_path, r
 
 def test_replay_exclude_topics_and_nothing_to_play(small_frames, tmp_path, ros_domain_id):
     bag = write_robot_bag(bag_path(tmp_path, "sqlite3"), "sqlite3", small_frames[:2])
-    listener = Listener({LEFT_TOPIC: Image, RIGHT_TOPIC: Image})
+    listener = StampListener({LEFT_TOPIC: Image, RIGHT_TOPIC: Image})
     try:
         proc = _replay(bag, "--exclude-topics", RIGHT_TOPIC, "--wait-for", LEFT_TOPIC)
         _, err = proc.communicate(timeout=60)
@@ -202,7 +167,8 @@ def test_replay_loop_into_live_node_keeps_answering(small_frames, tmp_path, ros_
 
 def test_replay_left_right_publish_on_the_nodes_inputs(small_frames, tmp_path, ros_domain_id):
     bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", small_frames[:3])
-    listener = Listener({"/left/image_raw": Image, "/right/image_raw": Image, LEFT_TOPIC: Image})
+    topics = {"/left/image_raw": Image, "/right/image_raw": Image, LEFT_TOPIC: Image}
+    listener = StampListener(topics)
     try:
         proc = _replay(
             bag,

@@ -25,7 +25,6 @@ from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_helpers import (  # noqa: E402
     RELIABLE,
-    Ros,
     header,
     image_msg,
     next_stamp,
@@ -77,13 +76,6 @@ def figures():
     f = Figures()
     yield f
     f.write()
-
-
-@pytest.fixture(scope="module")
-def ros(ros_domain_id):
-    r = Ros()
-    yield r
-    r.close()
 
 
 @pytest.fixture(scope="module")

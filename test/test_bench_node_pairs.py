@@ -47,13 +47,17 @@ def test_two_pairs_per_sequence_print_and_write_docs(shared_data, tmp_path, caps
     assert out.count("2 pairs x 1 seeds") == 2
     rows = re.findall(
         r"^\| (\S+)(?: \(default\))? \| (\d\.\d{3}) ± \S+ \| (\S+) \| (\S+) \| \S+ \| (\S+) \| "
-        r"(\S+) \| (\S+) \|$",
+        r"(\S+) / (\S+) \| (\S+) \| (\S+) \| (\S+) \|$",
         out,
         re.M,
     )
     assert [r[0] for r in rows] == [DEFAULT_METHOD, "cv-magsac"] * 2
-    for name, f, ok, below, hyp, ms, ratio in rows:
+    for name, f, ok, below, rot, dir_med, dir_p90, hyp, ms, ratio in rows:
         assert 0.0 <= float(f) <= 1.0
+        # a small forward step: the pose from a good F is within a few degrees of the cameras'
+        assert 0.0 <= float(rot) < 2.0
+        assert 0.0 <= float(dir_med) <= float(dir_p90) <= 180.0
+        assert float(dir_med) < 20.0
         assert 0.0 <= float(ok) <= float(below) <= 100.0
         assert float(ms) > 0
         assert (hyp == "n/a") == (name == "cv-magsac")

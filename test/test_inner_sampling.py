@@ -4,6 +4,9 @@ result is kept only if it is no worse at the threshold and at the noise truncati
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from ground_truth import manifest_pair
@@ -17,6 +20,9 @@ from sepfm_ros.geometry.inner_sampling import inner_sampling
 from sepfm_ros.geometry.nonlinear import noise_truncation
 from sepfm_ros.geometry.refine import fit_least_squares
 from sepfm_ros.geometry.synthetic import make_pair
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+from bench_outliers import with_outliers  # noqa: E402
 
 
 def _perturbed_start(seed: int):
@@ -80,21 +86,11 @@ def test_option_is_validated():
         EstimatorOptions(inner_samples=-1)
 
 
-def _with_outliers(pts_a, pts_b, pos, rate, rng):
-    """Real matches plus wrong ones (keypoints of a and b paired at random, shuffled in) until
-    the share of non-positives is ``rate``."""
-    n = len(pts_a)
-    extra = max(0, int(np.ceil(pos.sum() / (1.0 - rate))) - n)
-    a = np.concatenate([pts_a, pts_a[rng.integers(0, n, extra)] + rng.normal(0, 0.3, (extra, 2))])
-    b = np.concatenate([pts_b, pts_b[rng.integers(0, n, extra)]])
-    order = rng.permutation(len(a))
-    return a[order], b[order]
-
-
 def test_real_pairs_at_half_outliers(shared_data):
-    # Three shared pairs (SIFT ratio 0.8) with wrong matches added to 50 %: sep4 stops after
-    # a few hundred samples, and on some seeds in a worse basin (F-score 0.90-0.97); inner
-    # sampling takes it to the basin ransac7's thousand samples find (0.98-0.99).
+    # Three shared pairs (SIFT ratio 0.8) with wrong matches added to 50 % (bench_outliers'
+    # injection): sep4 stops after a few hundred samples, and on some seeds in a worse basin
+    # (F-score 0.95-0.97); inner sampling takes it to the basin ransac7's thousand samples find
+    # (0.98-1.00).
     ids = (
         "kitti_seq2/left/000036~left/000037",
         "kitti_seq2/left/000039~left/000041",
@@ -104,7 +100,7 @@ def test_real_pairs_at_half_outliers(shared_data):
     for pid in ids:
         pair, m, pos0 = manifest_pair(shared_data, pid, 0.8)
         rng = np.random.default_rng(7)
-        a, b = _with_outliers(m.pts_a, m.pts_b, pos0, 0.5, rng)
+        a, b = with_outliers(m.pts_a, m.pts_b, pos0, 0.5, rng)
         pos = positives(pair.F_gt, a, b)
         for samples in (20, 0):
             for seed in range(6):

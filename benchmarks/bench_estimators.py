@@ -64,6 +64,7 @@ def run_setting(
                     "f": met.f_score, "med": med, "mean": met.mean_error, "pct": met.pct_inliers,
                     "failed": met.failed,
                     "evaluable": met.evaluable, "ok": ok, "hyp": r.hypotheses, "ms": r.ms,
+                    "wrong_ok": r.F is not None and r.status == "ok" and not ok,
                     "line": r.line_pair is not None, "out": outlier_rate, "n": len(pos),
                 })  # fmt: skip
         el = time.time() - t0

@@ -48,7 +48,7 @@ from sepfm_ros.geometry.epipolar import (
     homogeneous_columns,
     msac_kernel,
     normalize_fundamental,
-    symmetric_epipolar_distance_h,
+    paired_hits_kernel,
 )
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
 from sepfm_ros.geometry.ransac import ransac_trials, trials_needed
@@ -310,7 +310,7 @@ def chance_inliers(
     if n < 2:
         return 0.0
     perms = rng.permuted(np.tile(np.arange(n), (shuffles, 1)), axis=1)  # (S, N)
-    X1 = np.tile(homogeneous_columns(pts1), shuffles)  # (3, S N): column s N + i is match i
-    X2 = homogeneous_columns(pts2)[:, perms.ravel()]
-    d = symmetric_epipolar_distance_h(np.ascontiguousarray(F[None]), X1, X2)[0]
-    return float(np.count_nonzero(d < threshold)) / shuffles
+    i1 = np.tile(np.arange(n), shuffles)  # pairing s N + i: match i's point 1, perms[s, i]'s 2
+    X1, X2 = homogeneous_columns(pts1), homogeneous_columns(pts2)
+    F = np.ascontiguousarray(F, dtype=np.float64)
+    return paired_hits_kernel(F, X1, X2, i1, perms.ravel(), float(threshold)) / shuffles

@@ -101,6 +101,21 @@ def distances_within_kernel(
 
 
 @numba.njit(cache=True, nogil=True)
+def paired_hits_kernel(
+    F: np.ndarray, X1: np.ndarray, X2: np.ndarray, i1: np.ndarray, i2: np.ndarray, threshold: float
+) -> int:
+    """How many pairings (X1[:, i1[p]], X2[:, i2[p]]) of (>=2, N) pixel points lie within
+    ``threshold`` px (symmetric epipolar distance) of F (3, 3); i1, i2: (P,) int indices."""
+    cap2 = threshold * threshold * _WITHIN_MARGIN
+    hits = 0
+    for p in range(i1.shape[0]):
+        a, b = i1[p], i2[p]
+        if _distance_within(F, X1[0, a], X1[1, a], X2[0, b], X2[1, b], cap2) < threshold:
+            hits += 1
+    return hits
+
+
+@numba.njit(cache=True, nogil=True)
 def distances_kernel(F: np.ndarray, X1: np.ndarray, X2: np.ndarray) -> np.ndarray:
     """(M, 3, 3) models, (>=2, N) pixel points -> (M, N) symmetric epipolar distances (px)."""
     M, N = F.shape[0], X1.shape[1]

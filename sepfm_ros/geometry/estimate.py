@@ -42,6 +42,9 @@ class Estimate:
         scale: the LMedS methods' robust scale sigma (px of symmetric epipolar distance) of F,
             1.4826 (1 + 5 / (N - p)) sqrt(median d^2); their inliers are d < 2.5 sigma. None
             for the other methods.
+        log10_nfa: log10 of the number of false alarms of the final inliers (Moisan and
+            Stival's a contrario test, :mod:`sepfm_ros.geometry.significance`): below 0, a
+            consensus that random matches do not give. None when F had fewer than 8 inliers.
     """
 
     F: np.ndarray | None
@@ -61,6 +64,7 @@ class Estimate:
     method: str = ""
     timings_ms: dict[str, float] = field(default_factory=dict)
     scale: float | None = None
+    log10_nfa: float | None = None
 
     @property
     def num_inliers(self) -> int:

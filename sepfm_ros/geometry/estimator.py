@@ -86,6 +86,7 @@ from sepfm_ros.geometry.ransac import (
     run_ransac,
 )
 from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
+from sepfm_ros.geometry.significance import MAX_LOG10_NFA, consensus_log10_nfa
 
 # method -> (separable?, solver, scoring)
 _METHODS: dict[str, tuple[bool, str, str]] = {
@@ -785,7 +786,7 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     est.F = F
     est.inliers = d.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
-    _final_status(est, d, threshold, plane)
+    _final_status(est, d, threshold, problem.rng.spawn(1)[0], plane)
 
 
 def _plane_check(problem: _Problem, est: Estimate, F: np.ndarray):
@@ -843,18 +844,28 @@ def _final_status(
     est: Estimate,
     d: Correspondences,
     threshold: float,
+    rng: np.random.Generator,
     plane: str | None,
     unreliable: str | None = None,
 ) -> None:
     """``est.status`` from its final inliers: too few, inliers in a band around one line (the
     more specific reason when a plane holds them too: a band lies on many planes), the plane
-    check's reason, or ``unreliable`` (a method's own reason); else left as it is."""
+    check's reason, ``unreliable`` (a method's own reason), or a consensus that random matches
+    give as well (``est.log10_nfa`` >= ``MAX_LOG10_NFA``, :mod:`significance`); else left as it
+    is. ``rng`` draws the random re-pairings of the significance test (its own stream)."""
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
         return
+    est.log10_nfa = consensus_log10_nfa(est.F, d, est.inliers, threshold, rng)
+    chance = None
+    if not est.log10_nfa < MAX_LOG10_NFA:
+        chance = (
+            f"not significant: {k} of {len(d)} matches within {threshold:g} px, as random "
+            f"matches would give (log10 NFA {est.log10_nfa:+.1f})"
+        )
     band = _line_band_status(d.pts1[est.inliers], d.pts2[est.inliers], threshold)
-    est.status = band or plane or unreliable or est.status
+    est.status = band or plane or unreliable or chance or est.status
 
 
 def _final_model(
@@ -918,4 +929,4 @@ def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
             "(more than half of the matches are outliers, beyond LMedS's breakdown point, or "
             "the noise exceeds the threshold)"
         )
-    _final_status(est, d, threshold, plane, unreliable)
+    _final_status(est, d, threshold, problem.rng.spawn(1)[0], plane, unreliable)

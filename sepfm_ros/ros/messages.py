@@ -215,6 +215,7 @@ def estimate_values(
         "stage2_hypotheses": est.stage2_hypotheses,
         "fallback": est.fallback,
         "unfixed_lead": est.unfixed_lead,
+        "log10_nfa": "none" if est.log10_nfa is None else float(est.log10_nfa),
         "line_inliers": len(est.line_inliers),
         "line_a": _line_str(est.line_pair[0]) if est.line_pair is not None else "none",
         "line_b": _line_str(est.line_pair[1]) if est.line_pair is not None else "none",
@@ -244,7 +245,8 @@ def estimate_info(
 
     Level OK with message "ok" when F was estimated, WARN with the estimator's reason otherwise.
     Values: stamp_a, stamp_b (sec.nanosec), method, features, status, matches, inliers,
-    hypotheses, stage1_hypotheses, stage2_hypotheses, fallback, line_inliers, line_a, line_b
+    hypotheses, stage1_hypotheses, stage2_hypotheses, fallback, unfixed_lead, log10_nfa (the
+    a contrario significance of the inliers, "none" without one), line_inliers, line_a, line_b
     ("a b c" of a u + b v + c = 0, or "none"), size_a, size_b, coordinates (the pixels of F and
     the matches: "image", or "undistorted" pixels of K with camera_info), ``extra_values`` (e.g.
     the relative pose) and ms_<stage> per timing stage.
@@ -290,6 +292,7 @@ def failure_info(
         "stage2_hypotheses": 0,
         "fallback": False,
         "unfixed_lead": False,
+        "log10_nfa": "none",
         "line_inliers": 0,
         "line_a": "none",
         "line_b": "none",

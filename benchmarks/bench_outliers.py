@@ -35,6 +35,7 @@ from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, EstimatorOptions, estimate_fundamental
+from sepfm_ros.geometry.estimator import sample_cap
 from sepfm_ros.geometry.ransac import ransac_trials
 
 REPO = Path(__file__).resolve().parent.parent
@@ -72,6 +73,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC, help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     options = {k: int(v) for k, v in (kv.split("=") for kv in a.options.split(",") if kv)}
+    opt = EstimatorOptions.from_kwargs(**options)
     if not (DATA / "pairs.json").is_file():
         print(f"shared data not found at {DATA}", file=sys.stderr)
         return 2
@@ -99,15 +101,16 @@ def main(argv: list[str] | None = None) -> int:
                 ms = (time.perf_counter() - t) * 1e3
                 met = run_metrics(e.F, pa, pb, pos, 1.0)
                 ok = met.succeeded
+                cap = sample_cap(opt.max_samples, len(pa))
                 rows[name].append(
-                    (ok, met.f_score, e.hypotheses, ms, e.line_pair is not None, e.samples)
+                    (ok, met.f_score, e.hypotheses, ms, e.line_pair is not None, e.samples, cap)
                 )
             for name in ANCHORS:
                 r = REGISTRY[name].run(pa, pb, m.size_a, m.size_b, 1.0, 0.99, a.seed)
                 met = run_metrics(r.F, pa, pb, pos, 1.0)
                 ok = met.succeeded
                 hyp = np.nan if r.hypotheses is None else r.hypotheses
-                rows[name].append((ok, met.f_score, hyp, r.ms, False, 0))
+                rows[name].append((ok, met.f_score, hyp, r.ms, False, 0, 0))
             sys.stderr.write(
                 f"\r  rate {rate}: {i + 1}/{len(pairs)} pairs, {time.time() - t0:.0f} s"
             )
@@ -134,14 +137,15 @@ def main(argv: list[str] | None = None) -> int:
         f_default = np.mean([r[1] for r in rows[DEFAULT_METHOD]])
         diffs = [f"{n}'s: {f_default - np.mean([r[1] for r in rows[n]]):+.3f}" for n in ANCHORS]
         notes.append(f"  - {DEFAULT_METHOD} (default) F-score minus " + "; ".join(diffs))
-        cap = EstimatorOptions.from_kwargs(**options).max_samples
-        capped = int(np.count_nonzero(r7[:, 5] >= cap))
+        at_cap = r7[:, 5] >= r7[:, 6]
+        capped = int(np.count_nonzero(at_cap))
         if capped:
             # ransac7 stopped at the cap, not at F(7, r): the ratio then measures the cap
+            cap = int(np.median(r7[at_cap, 6]))
             floor = ransac_trials(4, rate, 0.99, max_trials=10**9) / cap
             notes.append(
-                f"  - ransac7 stopped at the sample cap ({cap}) in {capped} of {len(r7)} runs "
-                f"instead of at F(7, {rate:.2f}) = {ransac_trials(7, rate, 0.99, 10**9)} "
+                f"  - ransac7 stopped at the sample cap (median {cap}) in {capped} of {len(r7)} "
+                f"runs instead of at F(7, {rate:.2f}) = {ransac_trials(7, rate, 0.99, 10**9)} "
                 f"samples; with it capped, the samples ratio cannot fall below F(4, {rate:.2f}) "
                 f"/ {cap} = {floor:.2f} (stage 2 alone draws F(4, r) samples); sep4's median "
                 f"samples: {np.median(s4[:, 5]):.0f}"

@@ -9,6 +9,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sepfm_ros.geometry import METHODS, estimate_fundamental, normalize_fundamental
+from sepfm_ros.geometry.estimator import sample_cap
 from sepfm_ros.geometry.line_homography_fit import fit_line_homography
 from sepfm_ros.geometry.line_pairs import LineSearchOptions, find_line_pairs, working_scale
 from sepfm_ros.geometry.synthetic import make_pair
@@ -293,3 +294,19 @@ def test_local_optimisation_fits_on_at_most_lo_matches(method):
     assert np.array_equal(capped.polish(F0, F0), alone.polish(F0, F0))
     assert not np.array_equal(capped.local_optimize(F0), whole.local_optimize(F0))
     assert capped.score(F0[None])[1][0] == whole.score(F0[None])[1][0] > len(sub)
+
+
+def test_automatic_sample_cap_bounds_the_scoring_work():
+    """max_samples 0 (default): 10^7 / N samples within [10,000, 100,000]; a positive value is
+    the cap. On random matches the search runs to the cap, which the estimate reports."""
+    assert sample_cap(0, 55) == 100_000
+    assert sample_cap(0, 400) == 25_000
+    assert sample_cap(0, 5000) == 10_000
+    assert sample_cap(1234, 55) == 1234
+    rng = np.random.default_rng(0)
+    pts1, pts2 = rng.uniform(0, 640, (400, 2)), rng.uniform(0, 480, (400, 2))
+    for method, cap in (("ransac7", 25_000), ("sep4", 25_000)):
+        est = estimate_fundamental(pts1, pts2, (640, 480), method=method, seed=0)
+        assert est.samples == cap, (method, est.samples)
+    est = estimate_fundamental(pts1, pts2, (640, 480), method="ransac7", seed=0, max_samples=500)
+    assert est.samples == 500

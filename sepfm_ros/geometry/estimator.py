@@ -105,6 +105,27 @@ METHODS = tuple(_METHODS)
 DEFAULT_METHOD = "sep4"
 TRIPLES = ("raw", "synthesized", "all")
 RACE_POOLS = ("support", "model")
+#: The automatic sample cap (``max_samples`` 0, :func:`sample_cap`): matches scored in all,
+#: and the fewest and most samples.
+SCORING_BUDGET = 10_000_000
+MIN_AUTO_SAMPLES = 10_000
+MAX_AUTO_SAMPLES = 100_000
+
+
+def sample_cap(max_samples: int, n: int) -> int:
+    """The samples one estimate of ``n`` matches may draw: ``max_samples`` when positive, else
+    ``SCORING_BUDGET`` / n within [``MIN_AUTO_SAMPLES``, ``MAX_AUTO_SAMPLES``].
+
+    The automatic cap bounds the scoring work (samples x matches) rather than the samples:
+    10,000 samples from 1,000 matches up, up to 100,000 (PoseLib's cap) for fewer. A pair with
+    few matches and few true ones among them needs the most samples (13 true of 55: F(7, 0.24)
+    is about 100,000 seven-point samples) and each costs the least to score.
+    """
+    if max_samples > 0:
+        return int(max_samples)
+    return int(min(MAX_AUTO_SAMPLES, max(MIN_AUTO_SAMPLES, SCORING_BUDGET // max(n, 1))))
+
+
 #: Most 3-point samples of stage 1 per line pair and control-point orientation (two orientations).
 STAGE1_MAX_SAMPLES = 200
 #: Tolerance (working px) of the periodic line-pair test (``periodic_check``): a point is on a
@@ -122,7 +143,8 @@ class EstimatorOptions:
     Attributes:
         max_samples: cap on the samples of one estimate, shared by all its stages (the
             separable method's 3-point samples of stage 1, stage 2's racing arms and the
-            fallback), so a separable method draws no more than a baseline may.
+            fallback), so a separable method draws no more than a baseline may; 0 (default):
+            :func:`sample_cap` of the number of matches.
         refine: Sampson (IRLS) refinement of the final model.
         hough_width: working resolution of the line search, px.
         hough_min_votes: least votes of a Hough line.
@@ -216,7 +238,7 @@ class EstimatorOptions:
             match (docs/design.md, unfixed arm). 0: off.
     """
 
-    max_samples: int = 10000
+    max_samples: int = 0
     refine: bool = True
     hough_width: int = 512
     hough_min_votes: int = 4
@@ -256,7 +278,7 @@ class EstimatorOptions:
             if kind is float and not np.isfinite(converted):
                 raise ValueError(f"option {f.name} must be finite, got {value!r}")
             object.__setattr__(self, f.name, converted)
-        least = {"max_samples": 1, "inner_samples": 0, "hough_width": 1, "hough_min_votes": 1,
+        least = {"max_samples": 0, "inner_samples": 0, "hough_width": 1, "hough_min_votes": 1,
                  "hough_points": 1, "max_line_pairs": 1, "min_line_inliers": 3}  # fmt: skip
         for name, low in least.items():
             if getattr(self, name) < low:
@@ -518,7 +540,7 @@ def estimate_fundamental(
     reason = _degeneracy(p1, p2, threshold)
     if reason is None:
         data = Correspondences.from_pixels(p1, p2)
-        budget = Budget(opt.max_samples)
+        budget = Budget(sample_cap(opt.max_samples, len(data)))
         problem = _Problem(data, solver, scoring, threshold, confidence, opt, rng, budget)
         if separable:
             result = _separable(problem, est, size1, size2)
@@ -551,7 +573,7 @@ class _Problem:
     confidence: float
     opt: EstimatorOptions
     rng: np.random.Generator
-    budget: Budget  #: ``opt.max_samples`` samples, shared by every stage of this estimate
+    budget: Budget  #: :func:`sample_cap` samples, shared by every stage of this estimate
     scale: RobustScale = field(default_factory=RobustScale)  #: LMedS: shared by all arms
     #: (N,) bool, matches on a periodic line pair (``periodic_check``): left out of the pools
     #: of the stage-2 arms built after the pair was found periodic, last in the fallback's
@@ -584,7 +606,7 @@ class _Problem:
         """Samples drawn at least: LMedS F(k, 0.5) (see the module docstring), else 1."""
         if not self.lmeds:
             return 1
-        return min(ransac_trials(k, 0.5, self.confidence), self.opt.max_samples)
+        return min(ransac_trials(k, 0.5, self.confidence), self.budget.limit)
 
     def whole(self, race_share: float = 1.0) -> FundamentalProblem:
         """The problem over all matches (no fixed points), the ambiguous ones last in its pool;
@@ -609,7 +631,7 @@ class _Problem:
         arm = self.whole()
         sampling = replace(self.opt.sampling(), prosac_growth=max(1, self.budget.left()))
         return run_ransac(
-            [arm], self.rng, self.confidence, self.opt.max_samples,
+            [arm], self.rng, self.confidence, self.budget.limit,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
             budget=self.budget, sampling=sampling,
         )  # fmt: skip
@@ -665,7 +687,7 @@ def _separable(
             yield problem.whole(race_share=opt.unfixed_share)
 
     result = run_ransac(
-        stage2_arms(), problem.rng, problem.confidence, opt.max_samples,
+        stage2_arms(), problem.rng, problem.confidence, problem.budget.limit,
         race=RaceOptions(pool_rule=opt.race_pool, pool_ratio=opt.race_pool_ratio),
         budget=problem.budget,
         sampling=opt.sampling(),

@@ -93,6 +93,7 @@ def main(argv: list[str] | None = None) -> int:
             pos0 = positives(pair.F_gt, m.pts_a, m.pts_b)
             pa, pb = with_outliers(m.pts_a, m.pts_b, pos0, rate, rng)
             pos = positives(pair.F_gt, pa, pb)
+            cap = sample_cap(opt.max_samples, len(pa))  # our methods' sample cap on this pair
             for name in METHODS:
                 t = time.perf_counter()
                 e = estimate_fundamental(
@@ -101,7 +102,6 @@ def main(argv: list[str] | None = None) -> int:
                 ms = (time.perf_counter() - t) * 1e3
                 met = run_metrics(e.F, pa, pb, pos, 1.0)
                 ok = met.succeeded
-                cap = sample_cap(opt.max_samples, len(pa))
                 rows[name].append(
                     (ok, met.f_score, e.hypotheses, ms, e.line_pair is not None, e.samples, cap)
                 )

@@ -808,7 +808,7 @@ def _finish(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
     est.F = F
     est.inliers = d.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
-    _final_status(est, d, threshold, problem.rng.spawn(1)[0], plane)
+    _final_status(problem, est, plane)
 
 
 def _plane_check(problem: _Problem, est: Estimate, F: np.ndarray):
@@ -863,22 +863,19 @@ def _periodic_plane_check(problem: _Problem, est: Estimate, check: PlaneCheck) -
 
 
 def _final_status(
-    est: Estimate,
-    d: Correspondences,
-    threshold: float,
-    rng: np.random.Generator,
-    plane: str | None,
-    unreliable: str | None = None,
+    problem: _Problem, est: Estimate, plane: str | None, unreliable: str | None = None
 ) -> None:
     """``est.status`` from its final inliers: too few, inliers in a band around one line (the
     more specific reason when a plane holds them too: a band lies on many planes), the plane
     check's reason, ``unreliable`` (a method's own reason), or a consensus that random matches
     give as well (``est.log10_nfa`` >= ``MAX_LOG10_NFA``, :mod:`significance`); else left as it
-    is. ``rng`` draws the random re-pairings of the significance test (its own stream)."""
+    is. The significance test draws its random re-pairings from a stream of its own."""
+    d, threshold = problem.data, problem.threshold
     k = est.num_inliers
     if k < 8:
         est.status = f"degenerate: only {k} inliers"
         return
+    rng = problem.rng.spawn(1)[0]
     est.log10_nfa = consensus_log10_nfa(est.F, d, est.inliers, threshold, rng)
     chance = None
     if not est.log10_nfa < MAX_LOG10_NFA:
@@ -951,4 +948,4 @@ def _finish_lmeds(problem: _Problem, est: Estimate, F: np.ndarray) -> None:
             "(more than half of the matches are outliers, beyond LMedS's breakdown point, or "
             "the noise exceeds the threshold)"
         )
-    _final_status(est, d, threshold, problem.rng.spawn(1)[0], plane, unreliable)
+    _final_status(problem, est, plane, unreliable)

@@ -233,6 +233,25 @@ def test_stereo_camera_silent_is_a_stall():
         clock.t += 0.1
     stall = health.stall()
     assert stall is not None and "right camera silent" in stall
+    clock.t += 5.0  # then the left camera stops too: no camera is arriving, no stall
+    assert health.stall() is None
+
+
+def test_both_cameras_stopping_apart_is_not_a_stall():
+    """The two streams end 1 s apart (a loaded receiver drained one queue later): once both
+    are silent, the gap between their last images says nothing about either camera."""
+    clock = FakeClock()
+    health = Health(("left", "right"), input_timeout_s=0.5, clock=clock)
+    for _ in range(10):
+        health.input("left")
+        health.input("right")
+        health.pair_formed()
+        clock.t += 0.1
+    clock.t += 1.0
+    health.input("left")
+    clock.t += 10.0
+    assert health.stall() is None
+    assert health.level(health.stall())[0] == 0
 
 
 def test_log_throttle_lets_a_recurring_problem_through_periodically():

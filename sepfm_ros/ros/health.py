@@ -183,7 +183,12 @@ class Health:
             if topic not in ages and other in ages and ages[other] < timeout:
                 if now - min(last.values()) > timeout:
                     return f"no {topic} images yet, {other} images arriving"
-            if topic in ages and other in ages and ages[topic] - ages[other] > timeout:
+            if (
+                topic in ages
+                and other in ages
+                and ages[other] < timeout
+                and ages[topic] - ages[other] > timeout
+            ):
                 return (
                     f"{topic} camera silent for {ages[topic]:.1f} s while {other} images "
                     "arrive: no pairs"

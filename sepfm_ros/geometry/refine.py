@@ -17,7 +17,7 @@ from sepfm_ros.geometry.epipolar import (
     rank2_unit_kernel,
 )
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
-from sepfm_ros.geometry.solvers.design import column_gram
+from sepfm_ros.geometry.solvers.design import column_gram, design_row
 
 #: Inlier-threshold factors of :func:`iterative_refit`, loosest first (LO-RANSAC's iterative step).
 REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
@@ -25,16 +25,15 @@ REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 @numba.njit(cache=True, nogil=True)
 def _weighted_design(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray, R: np.ndarray):
-    """Write w_k r_k into the columns of R (9, K): the design rows r = kron([x2, 1], [x1, 1]) of
+    """Write w_k r_k into the columns of R (9, K): the design rows r (:func:`design_row`) of
     the matches idx (K,), weighted by w (K,); x1, x2: (N, 2) normalised coordinates. Their
     Gram matrix (:func:`column_gram`) is sum_k w_k^2 r_k r_k^T."""
     for k in range(idx.shape[0]):
-        i = idx[k]
-        x, y, u, v, wk = x1[i, 0], x1[i, 1], x2[i, 0], x2[i, 1], w[k]
-        ux, vx = u * wk, v * wk
-        R[0, k], R[1, k], R[2, k] = ux * x, ux * y, ux
-        R[3, k], R[4, k], R[5, k] = vx * x, vx * y, vx
-        R[6, k], R[7, k], R[8, k] = wk * x, wk * y, wk
+        i, wk = idx[k], w[k]
+        r = R[:, k]
+        # w_k kron([u, v, 1], [x, y, 1]) = kron([w_k u, w_k v, w_k], [x, y, 1])
+        design_row(x1[i, 0], x1[i, 1], wk * x2[i, 0], wk * x2[i, 1], r)
+        r[6:] *= wk
 
 
 #: Inverse iteration of :func:`smallest_eigenvector`: most steps, and the agreement of two

@@ -137,8 +137,18 @@ def _count(bag: Path, topic: str) -> int:
         return -1
 
 
-@pytest.mark.parametrize("sig", [signal.SIGKILL, signal.SIGINT])
-def test_process_interrupted_leaves_readable_bag(tmp_path, sig):
+def _ignore_sigint() -> None:
+    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
+    children."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+@pytest.mark.parametrize(
+    "sig, background",
+    [(signal.SIGKILL, False), (signal.SIGINT, False), (signal.SIGINT, True)],
+    ids=["SIGKILL", "SIGINT", "SIGINT-background"],
+)
+def test_process_interrupted_leaves_readable_bag(tmp_path, sig, background):
     out = tmp_path / "out"
     proc = subprocess.Popen(
         [
@@ -156,6 +166,7 @@ def test_process_interrupted_leaves_readable_bag(tmp_path, sig):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
+        preexec_fn=_ignore_sigint if background else None,
     )
     deadline = time.monotonic() + 60
     while _count(out, "/sepfm/estimate_info") < 3:  # the metadata is rewritten atomically
@@ -163,7 +174,12 @@ def test_process_interrupted_leaves_readable_bag(tmp_path, sig):
         assert time.monotonic() < deadline
         time.sleep(0.02)
     proc.send_signal(sig)
-    _, err = proc.communicate(timeout=30)
+    try:
+        _, err = proc.communicate(timeout=30)
+    finally:
+        if proc.poll() is None:  # the signal did not stop it
+            proc.kill()
+            proc.wait()
     assert "Traceback" not in err, err
     if sig == signal.SIGINT:
         assert proc.returncode == 130, err

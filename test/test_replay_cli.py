@@ -27,10 +27,17 @@ def _bag_stamps(topic: str) -> list[int]:
     return [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]
 
 
-def _replay(*args: str) -> subprocess.Popen:
+def _ignore_sigint() -> None:
+    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
+    children."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _replay(*args: str, background: bool = False) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "sepfm_ros", "replay", str(BAG), "--quiet", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
+        preexec_fn=_ignore_sigint if background else None,
     )  # fmt: skip
 
 
@@ -57,11 +64,14 @@ def test_rate_start_offset_topics_and_clock(ros_domain_id):
     assert stamps[3] <= listener.clock[0] <= stamps[5]
 
 
-def test_loop_repeats_until_interrupted(ros_domain_id):
+@pytest.mark.parametrize("background", [False, True], ids=["foreground", "background"])
+def test_loop_repeats_until_interrupted(ros_domain_id, background):
+    """SIGINT stops a looping replay, also one started as a shell's background job (SIGINT
+    inherited ignored)."""
     listener = StampListener({"/left/image_raw": Image, "/right/image_raw": Image}, clock=True)
     try:
         proc = _replay("--loop", "--rate", "8", "--topics", "/left/image_raw",
-                       "--wait-for", "/left/image_raw")  # fmt: skip
+                       "--wait-for", "/left/image_raw", background=background)  # fmt: skip
         deadline = time.monotonic() + 60
         while len(listener.stamps["/left/image_raw"]) < 30 and time.monotonic() < deadline:
             assert proc.poll() is None, proc.communicate()
@@ -70,8 +80,12 @@ def test_loop_repeats_until_interrupted(ros_domain_id):
         _, err = proc.communicate(timeout=30)
     finally:
         listener.close()
+        if proc.poll() is None:  # SIGINT did not stop it
+            proc.kill()
+            proc.wait()
     got = listener.stamps["/left/image_raw"]
     assert len(got) >= 30, len(got)  # 12 frames per pass: at least two full repeats
     stamps = _bag_stamps("/left/image_raw")
     assert got[:24] == stamps + stamps
     assert "Traceback" not in err
+    assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)

@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import signal
 import threading
 
 import cv2
@@ -21,7 +20,7 @@ from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.ros.memory import configure_malloc, use_node_dds_profiles
 from sepfm_ros.ros.node import SepfmNode
 from sepfm_ros.ros.parameters import parameters_help
-from sepfm_ros.ros.signals import raise_keyboard_interrupt
+from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 
 
 def limit_thread_pools(threads: int = 1) -> None:
@@ -47,25 +46,20 @@ def _usage() -> str:
     return "\n".join(lines)
 
 
-#: the signals that stop the node
-STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
-
-
 def warm_up_interruptibly() -> float | None:
     """:func:`warm_up` in a thread, so SIGINT / SIGTERM stop the node while kernels compile.
 
     numba compiles on: a KeyboardInterrupt raised in the compiling thread is lost. Returns the
     seconds spent, or None when interrupted (the thread is left to the process's exit).
 
-    Both signals get a handler here, SIGINT too: a process started in the background by a
-    shell inherits SIGINT ignored, and Python then installs no handler of its own (rclpy's
-    handlers, installed later, take SIGINT whatever it inherited).
+    Both signals get a handler here (:func:`install_stop_handlers`; rclpy's handlers,
+    installed later, take SIGINT whatever the process inherited).
     """
     done: dict[str, float] = {}
     thread = threading.Thread(
         target=lambda: done.update(s=warm_up()), name="kernel-warm-up", daemon=True
     )
-    previous = {s: signal.signal(s, raise_keyboard_interrupt) for s in STOP_SIGNALS}
+    previous = install_stop_handlers()
     try:
         thread.start()
         while thread.is_alive():
@@ -73,8 +67,7 @@ def warm_up_interruptibly() -> float | None:
     except KeyboardInterrupt:
         return None
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        restore_handlers(previous)
     return done.get("s", 0.0)
 
 

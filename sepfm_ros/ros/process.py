@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import bisect
-import signal
 import sys
 import time
 from collections import deque
@@ -76,7 +75,7 @@ from sepfm_ros.ros.results import (
     read_results,
     summarize,
 )
-from sepfm_ros.ros.signals import raise_keyboard_interrupt
+from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
@@ -474,7 +473,7 @@ def print_done(k: int, total: int, stamp: int) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parse(argv)
-    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    previous = install_stop_handlers()
     interrupted = False
     try:
         params = parse_params(args.param)
@@ -497,7 +496,7 @@ def main(argv: list[str]) -> int:
         interrupted = True
         done, total = -1, -1
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        restore_handlers(previous)
     if interrupted and not args.output.exists():
         print("sepfm_ros process: interrupted before any output", file=sys.stderr)
         return 130

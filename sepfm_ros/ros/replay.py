@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import argparse
 import importlib
-import signal
 import sys
 import threading
 import time
@@ -46,7 +45,7 @@ from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeE
 from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader, StampChecker
 from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
-from sepfm_ros.ros.signals import raise_keyboard_interrupt
+from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 
 GAP_FACTOR = 3.0
 
@@ -444,7 +443,7 @@ def main(argv: list[str]) -> int:
     # down at once, and a publish in flight then fails with "context is invalid" (a traceback)
     # before the interrupt reaches the loop
     rclpy.init(args=["replay", *ros_argv], signal_handler_options=SignalHandlerOptions.NO)
-    previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
+    previous = install_stop_handlers()
     node = rclpy.create_node("sepfm_replay")
     replayer = None
     try:
@@ -479,7 +478,7 @@ def main(argv: list[str]) -> int:
         print("sepfm_ros replay: interrupted", file=sys.stderr)
         return 130
     finally:
-        signal.signal(signal.SIGTERM, previous)
+        restore_handlers(previous)
         if replayer is not None:
             replayer.close()
         node.destroy_node()

@@ -42,17 +42,21 @@ def _infos(shared_data) -> tuple[CameraInfo, CameraInfo]:
     return out[0], out[1]
 
 
-def _write_kitti_bag(shared_data, path, rotation_deg=(0.0, 0.0, 0.0), with_info=True) -> None:
+def _write_kitti_bag(
+    shared_data, path, rotation_deg=(0.0, 0.0, 0.0), with_info=True, prefix="", lag_ns=0
+) -> None:
+    """KITTI's first FRAMES stereo frames at 10 Hz on ``{prefix}/left/image_raw`` and
+    ``.../right/...``, camera_info beside them; the right stamps ``lag_ns`` after the left."""
     info_l, info_r = _infos(shared_data)
     K = np.reshape(info_r.k, (3, 3))
     H = K @ cv2.Rodrigues(np.radians(rotation_deg))[0] @ np.linalg.inv(K)
     msgs = []
     for k in range(FRAMES):
-        stamp = 1_000_000_000 + k * 100_000_000
         for side, info, frame in (
             ("left", info_l, "left_camera_optical_frame"),
             ("right", info_r, "right_camera_optical_frame"),
         ):
+            stamp = 1_000_000_000 + k * 100_000_000 + (lag_ns if side == "right" else 0)
             img = cv2.imread(
                 str(shared_data / f"kitti_seq2/{side}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE
             )
@@ -61,12 +65,12 @@ def _write_kitti_bag(shared_data, path, rotation_deg=(0.0, 0.0, 0.0), with_info=
             header = Header(frame_id=frame)
             header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
             msg = numpy_to_image(img, "mono8", header)
-            msgs.append(RawMessage(f"/{side}/image_raw", IMAGE, stamp, serialize_message(msg)))
+            topic = f"{prefix}/{side}/image_raw"
+            msgs.append(RawMessage(topic, IMAGE, stamp, serialize_message(msg)))
             if with_info:
                 info.header = header
-                msgs.append(
-                    RawMessage(f"/{side}/camera_info", INFO, stamp, serialize_message(info))
-                )
+                info_topic = f"{prefix}/{side}/camera_info"
+                msgs.append(RawMessage(info_topic, INFO, stamp, serialize_message(info)))
     write_bag(path, msgs)
 
 
@@ -115,3 +119,24 @@ def test_bag_without_camera_info_clear_error(shared_data, tmp_path):
     assert r.returncode == 2
     assert "no camera_info on /left/camera_info" in r.stderr
     assert not (tmp_path / "out").exists()
+
+
+def test_robot_topic_names_and_a_lagging_right_camera(shared_data, tmp_path):
+    """A rig's own topic names (picked from the bag, no --left/--right) and right stamps 12 ms
+    after the left ones at 10 Hz: every frame pairs with its own right frame and the clean
+    calibration is OK; a slop the user sets below the lag pairs nothing, which the error says."""
+    bag = tmp_path / "rig"
+    _write_kitti_bag(shared_data, bag, prefix="/rig/stereo", lag_ns=12_000_000)
+    out = tmp_path / "out"
+    r = _run(bag, out)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "/rig/stereo/left/image_raw + /rig/stereo/right/image_raw, picked" in r.stdout
+    assert "/rig/stereo/left/camera_info" in r.stdout
+    assert f"[{FRAMES}/{FRAMES}]" in r.stdout and "decision: OK" in r.stdout
+    with (out / "calibration_check.csv").open() as f:
+        stamps = [int(row["stamp_ns"]) for row in csv.DictReader(f)]
+    assert stamps == [1_000_000_000 + k * 100_000_000 for k in range(FRAMES)]  # every left frame
+    r = _run(bag, tmp_path / "out2", "--sync-slop", "0.005")
+    assert r.returncode == 2, r.stdout + r.stderr
+    assert "no stereo pairs" in r.stderr and "--sync-slop" in r.stderr, r.stderr
+    assert "Traceback" not in r.stderr

@@ -1,11 +1,16 @@
 """``sepfm_ros calibration_check BAG``: is a stereo rig still calibrated? Offline, from a bag.
 
-For every stereo pair in the bag (left and right images with equal header stamps), matches the
-images with the node's pipeline (estimated in undistorted pixels of K, or rectified pixels),
-measures the inlier matches against the calibration from the bag's ``camera_info`` topics
-(:mod:`sepfm_ros.geometry.calibration_check`) and runs the same sliding-window monitor as the
-node. Prints one line per pair and the decision; writes ``calibration_check.png`` (error over
-time) and ``calibration_check.csv`` into ``--out``.
+For every stereo pair in the bag, matches the images with the node's pipeline (estimated in
+undistorted pixels of K, or rectified pixels), measures the inlier matches against the
+calibration from the bag's ``camera_info`` topics (:mod:`sepfm_ros.geometry.calibration_check`)
+and runs the same sliding-window monitor as the node. Prints one line per pair and the
+decision; writes ``calibration_check.png`` (error over time) and ``calibration_check.csv`` into
+``--out``.
+
+The image topics are ``--left``/``--right`` when given, else picked from the bag as ``process``
+picks them (two camera streams whose names differ by left/right). The images pair as in
+``process``: the node's approximate-time policy, within half the left camera's frame period
+unless ``--sync-slop`` is given, so a right camera that lags by a few milliseconds still pairs.
 
 Exit code: 0 when the final decision is OK, 1 when WARN, ERROR or not enough usable pairs
 (STALE), 2 on bad input (no such bag or topic, no camera_info, unusable calibration).
@@ -35,13 +40,16 @@ from sepfm_ros.geometry.calibration_check import (
 from sepfm_ros.geometry.camera import CalibrationError
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
+from sepfm_ros.ros.parameters import PARAMS
+from sepfm_ros.ros.process import pairing_slop_ns, validate_inputs
+from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
 
-IMAGE_TYPES = ("sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage")
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 
 
@@ -62,8 +70,8 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         description="Check a stereo rig's calibration (camera_info) against its images in a bag.",
     )
     p.add_argument("bag", help="rosbag2 directory or .mcap/.db3 file")
-    p.add_argument("--left", default="/left/image_raw", help="left image topic")
-    p.add_argument("--right", default="/right/image_raw", help="right image topic")
+    p.add_argument("--left", help="left image topic (default: picked from the bag)")
+    p.add_argument("--right", help="right image topic (default: picked from the bag)")
     p.add_argument("--left-info", help="left camera_info topic (default: beside --left)")
     p.add_argument("--right-info", help="right camera_info topic (default: beside --right)")
     p.add_argument(
@@ -81,6 +89,13 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--warn-rotation-deg", type=float, default=d.warn_rotation_deg)
     p.add_argument("--error-rotation-deg", type=float, default=d.error_rotation_deg)
     p.add_argument("--max-pairs", type=int, default=0, help="stop after this many pairs (0: all)")
+    p.add_argument(
+        "--sync-slop",
+        type=float,
+        metavar="SECONDS",
+        help="largest stamp difference of a stereo pair (default: just under half the left "
+        "camera's frame period)",
+    )
     return p.parse_args(argv)
 
 
@@ -127,19 +142,17 @@ class _Rig:
 def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
     """Check every stereo pair of the bag; print progress and figures. Raises BagError,
     CalibrationError or ValueError on bad input."""
-    left_info = args.left_info or camera_info_topic(args.left)
-    right_info = args.right_info or camera_info_topic(args.right)
-    rectified = (
-        args.rectified == "yes"
-        or args.rectified == "auto"
-        and "image_rect" in args.left + args.right
-    )
+    if args.sync_slop is not None and not args.sync_slop >= 0:
+        raise ValueError(f"--sync-slop must be >= 0 s, got {args.sync_slop}")
     monitor = CalibrationMonitor(_monitor_config(args))
     pipeline = Pipeline(PipelineConfig())
     rows: list[PairRow] = []
     with BagReader(args.bag) as reader:
-        for topic in (args.left, args.right):
-            reader.require(topic, IMAGE_TYPES)
+        spec = detect_inputs(reader, "stereo", args.left, args.right)
+        left, right = spec.topics
+        left_info = args.left_info or camera_info_topic(left)
+        right_info = args.right_info or camera_info_topic(right)
+        rectified = args.rectified == "yes" or args.rectified == "auto" and spec.rectified()
         for topic in (left_info, right_info):
             if topic not in reader.topics:
                 have = ", ".join(
@@ -151,33 +164,39 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
                     f"{have or 'none'}; choose them with --left-info/--right-info)"
                 )
             reader.require(topic, (CAMERA_INFO,))
-        total = min(reader.topics[args.left].count, reader.topics[args.right].count)
+        stamps = validate_inputs(reader, spec)
+        params = {
+            "sync_slop_s": PARAMS["sync_slop_s"].default
+            if args.sync_slop is None
+            else args.sync_slop
+        }
+        slop_ns = pairing_slop_ns(params, stamps[left], args.sync_slop is not None)
+        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(
+            slop_ns, int(PARAMS["sync_queue_size"].default)
+        )
+        total = min(len(stamps[left]), len(stamps[right]))
         if args.max_pairs:
             total = min(total, args.max_pairs)
-        side_of = {args.left: "left", args.right: "right", left_info: "left", right_info: "right"}
+        side_of = {left: LEFT, right: RIGHT}
         rig = _Rig(rectified)
-        pending: dict[str, dict[int, Any]] = {"left": {}, "right": {}}
         print(
-            f"checking {total} stereo pairs of {args.bag} ({'rectified' if rectified else 'raw'}"
-            f" images, calibration from {left_info} and {right_info})",
+            f"checking {total} stereo pairs of {args.bag} ({left} + {right}"
+            + (", picked from the bag's image topics" if spec.picked else "")
+            + f"; {'rectified' if rectified else 'raw'} images, pairs within "
+            f"{slop_ns / 1e6:.1f} ms, calibration from {left_info} and {right_info})",
             file=out,
         )
         ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
-        for raw in reader.messages([args.left, args.right, left_info, right_info]):
+        for raw in reader.messages([left, right, left_info, right_info]):
             msg = reader.deserialize(raw)
-            side = side_of[raw.topic]
-            if raw.topic in (left_info, right_info):
-                rig.infos[side] = msg
+            if raw.topic == left_info:
+                rig.infos["left"] = msg
+            elif raw.topic == right_info:
+                rig.infos["right"] = msg
             else:
-                stamp = stamp_ns(msg.header.stamp)
-                other = pending["right" if side == "left" else "left"]
-                if stamp in other:
-                    mate = other.pop(stamp)
-                    ready.append((stamp, *((msg, mate) if side == "left" else (mate, msg))))
-                else:
-                    pending[side][stamp] = msg
-                    for old in sorted(pending[side])[:-8]:  # keep recent unmatched images only
-                        del pending[side][old]
+                pair = sync.add(side_of[raw.topic], stamp_ns(msg.header.stamp), msg)
+                if pair is not None:
+                    ready.append((stamp_ns(pair[0].header.stamp), *pair))
             while (
                 ready
                 and len(rig.infos) == 2
@@ -194,6 +213,11 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
             missing = [s for s in ("left", "right") if s not in rig.infos]
             topics = [left_info if s == "left" else right_info for s in missing]
             raise CalibrationError(f"no camera_info message on {', '.join(topics)} in the bag")
+        if not rows and not sync.stats.pairs:
+            raise BagError(
+                f"no stereo pairs: no {left} image has a {right} image within "
+                f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
+            )
     return rows
 
 
@@ -313,10 +337,7 @@ def main(argv: list[str]) -> int:
         print("calibration_check: interrupted", file=sys.stderr)
         return 130
     if not rows:
-        print(
-            f"calibration_check: no stereo pairs (equal stamps on {args.left} and {args.right})",
-            file=sys.stderr,
-        )
+        print("calibration_check: no stereo pair could be decoded", file=sys.stderr)
         return 2
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -183,8 +183,10 @@ def test_ambiguous_image_topics_give_a_clear_error(kitti_frames, tmp_path):
     with BagReader(bag) as reader:
         assert detect_inputs(reader, mode="stereo").topics == (LEFT_TOPIC, RIGHT_TOPIC)
         assert detect_inputs(reader, image=center).topics == (center,)
-        with pytest.raises(TopicNotFoundError, match="3 camera image topics"):
+        with pytest.raises(TopicNotFoundError, match="3 camera image topics") as err:
             detect_inputs(reader, mode="motion")
+        assert "--image TOPIC (motion input is needed here)" in str(err.value)
+        assert "--left" not in str(err.value)  # a motion-only command takes no stereo flags
         with pytest.raises(TopicNotFoundError, match="/nope is not in bag"):
             detect_inputs(reader, left="/nope", right=RIGHT_TOPIC)
 

@@ -140,3 +140,14 @@ def test_robot_topic_names_and_a_lagging_right_camera(shared_data, tmp_path):
     assert r.returncode == 2, r.stdout + r.stderr
     assert "no stereo pairs" in r.stderr and "--sync-slop" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_motion_bag_says_stereo_is_needed(tmp_path):
+    """A bag with one camera: calibration_check needs a stereo pair and says which flags
+    choose one (not --image, which it does not take)."""
+    bag = REPO_ROOT / "bags" / "synthetic_motion"
+    r = _run(bag, tmp_path / "out")
+    assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
+    assert "no two image topics whose names differ by left/right" in r.stderr
+    assert "--left TOPIC --right TOPIC (stereo input is needed here)" in r.stderr
+    assert "--image" not in r.stderr

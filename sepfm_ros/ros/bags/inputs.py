@@ -114,14 +114,18 @@ def _spec(reader: BagReader, mode: str, topics: tuple[str, ...], picked: bool) -
     return InputSpec(mode, transport, topics, picked)
 
 
-def _choices_text(reader: BagReader, why: str) -> str:
+def _choices_text(reader: BagReader, why: str, mode: str | None = None) -> str:
     have = image_topics(reader)
     listing = ", ".join(f"{t} ({reader.topics[t].msgtype})" for t in have) or "none"
     others = sorted(set(reader.topics) - set(have))
+    flags = {
+        "stereo": "--left TOPIC --right TOPIC (stereo input is needed here)",
+        "motion": "--image TOPIC (motion input is needed here)",
+    }.get(mode, "--left TOPIC --right TOPIC (stereo) or --image TOPIC (motion)")
     return (
         f"bag {reader.path}: {why}; its image topics: {listing}"
         + (f" (other topics: {', '.join(others)})" if others else "")
-        + "; choose with --left TOPIC --right TOPIC (stereo) or --image TOPIC (motion)"
+        + f"; choose with {flags}"
     )
 
 
@@ -172,4 +176,4 @@ def detect_inputs(
         why = "no two image topics whose names differ by left/right"
     else:
         why = f"{len(streams)} camera image topics, cannot tell which to use"
-    raise TopicNotFoundError(_choices_text(reader, why))
+    raise TopicNotFoundError(_choices_text(reader, why, mode))

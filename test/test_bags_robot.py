@@ -1,4 +1,5 @@
-"""``process`` on bags recorded the way a robot records them (written with rosbags in the test).
+"""``process`` and ``calibration_check`` on bags recorded the way a robot records them (written
+with rosbags in the test).
 
 Real KITTI stereo frames under a robot's topic names (``/camera/left/image_raw``, a
 ``camera_info`` per camera, ``/tf``), in rosbag2 sqlite3, rosbag2 mcap and ROS 1 ``.bag``, with
@@ -275,3 +276,27 @@ def test_a_definition_rosbags_cannot_verify_does_not_lose_the_bag(kitti_frames, 
     assert (spec.mode, spec.topics) == ("motion", ("/front/image_raw",))
     done, total = run_process(bag, tmp_path / "out", parse_params(PARAMS), progress=False)
     assert done == total == 2
+
+
+def test_calibration_check_on_a_lagging_ros1_robot_bag(kitti_frames, shared_data, tmp_path):
+    """calibration_check reads a robot's ROS 1 bag as process does: its topic names picked,
+    the camera_info beside them, the right camera 12 ms late; KITTI's own calibration is OK."""
+    from sepfm_ros.geometry.pose import pose_from_projections
+
+    cams = json.loads((shared_data / "cameras.json").read_text())
+    K_a, _, _, t = pose_from_projections(
+        np.array(cams["kitti_seq2/left/000000.png"]), np.array(cams["kitti_seq2/right/000000.png"])
+    )
+    bag = write_robot_bag(
+        bag_path(tmp_path, "ros1"), "ros1", kitti_frames, right_lag_ns=LAG_NS, K=K_a,
+        baseline_m=float(np.linalg.norm(t)),
+    )  # fmt: skip
+    out = tmp_path / "check"
+    res = subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", "calibration_check", str(bag), "--out", str(out),
+         "--min-pairs", "2"],
+        cwd=REPO, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert res.returncode == 0, res.stdout + res.stderr
+    assert f"{LEFT_TOPIC} + {RIGHT_TOPIC}, picked" in res.stdout
+    assert f"[{N_PAIRS}/{N_PAIRS}]" in res.stdout and "decision: OK" in res.stdout

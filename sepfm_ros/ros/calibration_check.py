@@ -69,7 +69,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         prog="sepfm_ros calibration_check",
         description="Check a stereo rig's calibration (camera_info) against its images in a bag.",
     )
-    p.add_argument("bag", help="rosbag2 directory or .mcap/.db3 file")
+    p.add_argument("bag", help="input bag: rosbag2 folder, .mcap, .db3 or ROS 1 .bag")
     p.add_argument("--left", help="left image topic (default: picked from the bag)")
     p.add_argument("--right", help="right image topic (default: picked from the bag)")
     p.add_argument("--left-info", help="left camera_info topic (default: beside --left)")

@@ -378,7 +378,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         description=__doc__,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    p.add_argument("bag", type=Path)
+    p.add_argument("bag", type=Path, help="bag to play: rosbag2 folder, .mcap, .db3 or ROS 1 .bag")
     p.add_argument("-r", "--rate", type=float, default=1.0, help="speed factor (default 1)")
     p.add_argument(
         "-l",

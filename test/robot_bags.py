@@ -19,6 +19,9 @@ from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.types import header_stamp_ns
+
 FORMATS = ("sqlite3", "mcap", "ros1")
 LEFT_TOPIC = "/camera/left/image_raw"
 RIGHT_TOPIC = "/camera/right/image_raw"
@@ -179,3 +182,9 @@ def write_robot_bag(
                 data = ts.serialize_cdr(msg, msgtype)
             writer.write(conns[topic], t, bytes(data))
     return path
+
+
+def header_stamps(bag: Path, topic: str) -> list[int]:
+    """The header stamps (ns) of ``topic``'s messages in ``bag``, in bag order."""
+    with BagReader(bag) as reader:
+        return [header_stamp_ns(m.data) for m in reader.messages([topic])]

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from rclpy.serialization import serialize_message
+from shell_jobs import as_background_job
 from std_msgs.msg import Header, String
 
 from sepfm_ros.demo import bundled_bags_dir
@@ -137,12 +138,6 @@ def _count(bag: Path, topic: str) -> int:
         return -1
 
 
-def _ignore_sigint() -> None:
-    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
-    children."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
 @pytest.mark.parametrize(
     "sig, background",
     [(signal.SIGKILL, False), (signal.SIGINT, False), (signal.SIGINT, True)],
@@ -166,7 +161,7 @@ def test_process_interrupted_leaves_readable_bag(tmp_path, sig, background):
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
         text=True,
-        preexec_fn=_ignore_sigint if background else None,
+        preexec_fn=as_background_job if background else None,
     )
     deadline = time.monotonic() + 60
     while _count(out, "/sepfm/estimate_info") < 3:  # the metadata is rewritten atomically

@@ -11,14 +11,9 @@ import time
 import pytest
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
+from shell_jobs import as_background_job
 
 from sepfm_ros.ros.node_main import spin_until_shutdown
-
-
-def _ignore_sigint() -> None:
-    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
-    children."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 @pytest.mark.parametrize(
@@ -36,7 +31,7 @@ def test_signal_during_kernel_compilation_exits_cleanly(sig, background, tmp_pat
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
-        preexec_fn=_ignore_sigint if background else None,
+        preexec_fn=as_background_job if background else None,
     )
     try:
         deadline = time.monotonic() + 120.0

@@ -12,32 +12,21 @@ import pytest
 
 pytest.importorskip("rclpy")
 
+from robot_bags import header_stamps  # noqa: E402
 from ros_helpers import StampListener  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
+from shell_jobs import as_background_job  # noqa: E402
 
 from sepfm_ros.demo import bundled_bags_dir  # noqa: E402
-from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
 
 BAG = bundled_bags_dir() / "synthetic_stereo"  # 12 stereo frames at 2 Hz
-
-
-def _bag_stamps(topic: str) -> list[int]:
-    with BagReader(BAG) as bag:
-        msgs = [bag.deserialize(m) for m in bag.messages([topic])]
-    return [m.header.stamp.sec * 10**9 + m.header.stamp.nanosec for m in msgs]
-
-
-def _ignore_sigint() -> None:
-    """How a shell starts a background job (``cmd &``): SIGINT ignored, inherited by its
-    children."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _replay(*args: str, background: bool = False) -> subprocess.Popen:
     return subprocess.Popen(
         [sys.executable, "-m", "sepfm_ros", "replay", str(BAG), "--quiet", *args],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
-        preexec_fn=_ignore_sigint if background else None,
+        preexec_fn=as_background_job if background else None,
     )  # fmt: skip
 
 
@@ -53,7 +42,7 @@ def test_rate_start_offset_topics_and_clock(ros_domain_id):
     finally:
         listener.close()
     assert proc.returncode == 0, err
-    stamps = _bag_stamps("/left/image_raw")
+    stamps = header_stamps(BAG, "/left/image_raw")
     # frames every 0.5 s: skipping the first 2 s leaves frames 4..11, in order
     assert listener.stamps["/left/image_raw"] == stamps[4:]
     assert listener.stamps["/right/image_raw"] == []  # not selected
@@ -85,7 +74,7 @@ def test_loop_repeats_until_interrupted(ros_domain_id, background):
             proc.wait()
     got = listener.stamps["/left/image_raw"]
     assert len(got) >= 30, len(got)  # 12 frames per pass: at least two full repeats
-    stamps = _bag_stamps("/left/image_raw")
+    stamps = header_stamps(BAG, "/left/image_raw")
     assert got[:24] == stamps + stamps
     assert "Traceback" not in err
     assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)

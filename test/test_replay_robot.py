@@ -23,12 +23,17 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from robot_bags import LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag  # noqa: E402
+from robot_bags import (  # noqa: E402
+    LEFT_TOPIC,
+    RIGHT_TOPIC,
+    bag_path,
+    header_stamps,
+    write_robot_bag,
+)
 from ros_helpers import RELIABLE, REPO, Ros, StampListener, start_node  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
 from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
-from sepfm_ros.ros.bags.types import header_stamp_ns  # noqa: E402
 from sepfm_ros.ros.messages import ESTIMATE_STATUS_NAME  # noqa: E402
 from sepfm_ros.ros.replay import Replayer  # noqa: E402
 
@@ -62,11 +67,6 @@ def _replay(bag: Path, *args: str) -> subprocess.Popen:
     )
 
 
-def _stamps(bag: Path, topic: str) -> list[int]:
-    with BagReader(bag) as reader:
-        return [header_stamp_ns(m.data) for m in reader.messages([topic])]
-
-
 @pytest.mark.parametrize("fmt", ["mcap", "ros1"])
 def test_replay_skips_tf_plays_the_rest_and_loops(fmt, small_frames, tmp_path, ros_domain_id):
     bag = write_robot_bag(bag_path(tmp_path, fmt), fmt, small_frames, right_lag_ns=12_000_000)
@@ -91,7 +91,7 @@ def test_replay_skips_tf_plays_the_rest_and_loops(fmt, small_frames, tmp_path, r
         assert len(skips) == 1, err  # one warning for /tf, however many passes
         assert "skipping /tf: message type tf2_msgs/msg/TFMessage is not installed" in skips[0]
     for topic in (LEFT_TOPIC, RIGHT_TOPIC, info):
-        one_pass = _stamps(bag, topic)
+        one_pass = header_stamps(bag, topic)
         got = listener.stamps[topic]
         # looped: a second pass starts again at the first stamp (stamps go back in time)
         assert got[: 2 * N_FRAMES] == one_pass + one_pass, (topic, got)
@@ -109,7 +109,7 @@ def test_replay_exclude_topics_and_nothing_to_play(small_frames, tmp_path, ros_d
     finally:
         listener.close()
     assert proc.returncode == 0, err
-    assert listener.stamps[LEFT_TOPIC] == _stamps(bag, LEFT_TOPIC)
+    assert listener.stamps[LEFT_TOPIC] == header_stamps(bag, LEFT_TOPIC)
     assert listener.stamps[RIGHT_TOPIC] == []
     if not HAVE_TF2_MSGS:
         res = subprocess.run(
@@ -158,7 +158,7 @@ def test_replay_loop_into_live_node_keeps_answering(small_frames, tmp_path, ros_
             replay.communicate(timeout=30)
         proc.stop()
         ros.close()
-    first = _stamps(bag, LEFT_TOPIC)
+    first = header_stamps(bag, LEFT_TOPIC)
     # more answers than one pass has pairs, and answers for a pass after a jump back
     assert len(answers) >= 2 * N_FRAMES + 1, (answers, proc.output()[-2000:])
     jumps = [k for k in range(1, len(answers)) if answers[k] < answers[k - 1]]
@@ -182,8 +182,8 @@ def test_replay_left_right_publish_on_the_nodes_inputs(small_frames, tmp_path, r
     finally:
         listener.close()
     assert proc.returncode == 0, err
-    assert listener.stamps["/left/image_raw"] == _stamps(bag, LEFT_TOPIC)
-    assert listener.stamps["/right/image_raw"] == _stamps(bag, RIGHT_TOPIC)
+    assert listener.stamps["/left/image_raw"] == header_stamps(bag, LEFT_TOPIC)
+    assert listener.stamps["/right/image_raw"] == header_stamps(bag, RIGHT_TOPIC)
     assert listener.stamps[LEFT_TOPIC] == []  # remapped, not published under the recorded name
 
 

@@ -42,15 +42,13 @@ from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.bags.types import format_stamp
+from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
-from sepfm_ros.ros.parameters import PARAMS
-from sepfm_ros.ros.process import pairing_slop_ns, validate_inputs
+from sepfm_ros.ros.parameters import parameter_error
+from sepfm_ros.ros.process import pairing_slop_ns, parse_params, validate_inputs
 from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
-
-CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 
 
 @dataclass
@@ -142,8 +140,12 @@ class _Rig:
 def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
     """Check every stereo pair of the bag; print progress and figures. Raises BagError,
     CalibrationError or ValueError on bad input."""
-    if args.sync_slop is not None and not args.sync_slop >= 0:
-        raise ValueError(f"--sync-slop must be >= 0 s, got {args.sync_slop}")
+    params = parse_params([])  # the node's pairing parameters, at their defaults
+    if args.sync_slop is not None:
+        error = parameter_error("sync_slop_s", args.sync_slop)
+        if error:
+            raise ValueError(f"--sync-slop: {error}")
+        params["sync_slop_s"] = args.sync_slop
     monitor = CalibrationMonitor(_monitor_config(args))
     pipeline = Pipeline(PipelineConfig())
     rows: list[PairRow] = []
@@ -165,15 +167,8 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
                 )
             reader.require(topic, (CAMERA_INFO,))
         stamps = validate_inputs(reader, spec)
-        params = {
-            "sync_slop_s": PARAMS["sync_slop_s"].default
-            if args.sync_slop is None
-            else args.sync_slop
-        }
         slop_ns = pairing_slop_ns(params, stamps[left], args.sync_slop is not None)
-        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(
-            slop_ns, int(PARAMS["sync_queue_size"].default)
-        )
+        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(slop_ns, params["sync_queue_size"])
         total = min(len(stamps[left]), len(stamps[right]))
         if args.max_pairs:
             total = min(total, args.max_pairs)

@@ -219,7 +219,8 @@ def test_stereo_inputs_without_pairs_warn_with_the_measured_offset():
     assert health.stall() is None
 
 
-def test_stereo_camera_silent_is_a_stall():
+def _paired_stereo_health() -> tuple[FakeClock, Health]:
+    """Health of a stereo input after 1 s of both cameras at 10 Hz, every frame paired."""
     clock = FakeClock()
     health = Health(("left", "right"), input_timeout_s=0.5, clock=clock)
     for _ in range(10):
@@ -227,6 +228,11 @@ def test_stereo_camera_silent_is_a_stall():
         health.input("right")
         health.pair_formed()
         clock.t += 0.1
+    return clock, health
+
+
+def test_stereo_camera_silent_is_a_stall():
+    clock, health = _paired_stereo_health()
     for _ in range(10):
         health.input("left")
         health.pair_formed()
@@ -240,13 +246,7 @@ def test_stereo_camera_silent_is_a_stall():
 def test_both_cameras_stopping_apart_is_not_a_stall():
     """The two streams end 1 s apart (a loaded receiver drained one queue later): once both
     are silent, the gap between their last images says nothing about either camera."""
-    clock = FakeClock()
-    health = Health(("left", "right"), input_timeout_s=0.5, clock=clock)
-    for _ in range(10):
-        health.input("left")
-        health.input("right")
-        health.pair_formed()
-        clock.t += 0.1
+    clock, health = _paired_stereo_health()
     clock.t += 1.0
     health.input("left")
     clock.t += 10.0

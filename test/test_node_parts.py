@@ -99,6 +99,50 @@ def test_stereo_pairing_restarts_after_a_jump_back():
     assert out.pair is not None and out.pair[0].item == "l1"
 
 
+def test_stereo_pairing_a_topic_delivered_seconds_late_is_not_a_jump_back():
+    """10 Hz; the right camera's frames arrive 1.5 s (15 frames) after the left's with the same
+    stamps: each side's stamps only go forward, so nothing resets and every frame pairs."""
+    pairing: StereoPairing[str] = StereoPairing(slop_ns=5 * MS, queue_size=20, jump_back_s=1.0)
+    pairs, resets = [], 0
+    for k in range(40):
+        events = [(LEFT, k)] + ([(RIGHT, k - 15)] if k >= 15 else [])
+        for side, j in events:
+            out = pairing.add(side, Frame(f"{'LR'[side]}{j}", 30 * S + j * 100 * MS))
+            resets += out.reset
+            if out.pair is not None:
+                pairs.append((out.pair[0].item, out.pair[1].item))
+    assert resets == 0
+    assert pairs == [(f"L{j}", f"R{j}") for j in range(25)]
+
+
+def test_stereo_pairing_reset_keeps_the_other_sides_new_frames():
+    """A bag loops and the right camera's new frames arrive before the left's first one: the
+    right camera's jump back drops the old run's queued left frame and forgets the left's newest
+    stamp, so the left's first new frame pairs at once and no pair is lost."""
+    pairing: StereoPairing[str] = StereoPairing(slop_ns=5 * MS, queue_size=10, jump_back_s=1.0)
+    for k in range(3):
+        pairing.add(LEFT, Frame("l", 20 * S + k * 100 * MS))
+        assert pairing.add(RIGHT, Frame("r", 20 * S + k * 100 * MS)).pair is not None
+    pairing.add(LEFT, Frame("l-old", 20 * S + 300 * MS))  # unpaired frame of the old run
+    # right loops first: its own jump back; the queued old left frame is dropped
+    assert pairing.add(RIGHT, Frame("r0", 10 * S)).reset
+    assert pairing.add(RIGHT, Frame("r1", 10 * S + 100 * MS)).pair is None
+    out = pairing.add(LEFT, Frame("l0", 10 * S))
+    assert not out.reset and out.pair is not None
+    assert (out.pair[0].item, out.pair[1].item) == ("l0", "r0")
+    out = pairing.add(LEFT, Frame("l1", 10 * S + 100 * MS))
+    assert not out.reset and out.pair is not None
+    assert (out.pair[0].item, out.pair[1].item) == ("l1", "r1")
+    assert pairing.stats.late == 0
+    # a late left straggler of the old run (20.4 s) is newer: queued, pairs with nothing; the
+    # next new left frame is then a jump back that keeps the right's queued new frame
+    assert pairing.add(LEFT, Frame("l-straggler", 20 * S + 400 * MS)).pair is None
+    assert pairing.add(RIGHT, Frame("r2", 10 * S + 200 * MS)).pair is None
+    out = pairing.add(LEFT, Frame("l2", 10 * S + 200 * MS))
+    assert out.reset and out.pair is not None
+    assert (out.pair[0].item, out.pair[1].item) == ("l2", "r2")
+
+
 # --------------------------------------------------------------------------- scheduler
 def test_scheduler_owed_pair_is_never_replaced_and_newest_wins_behind_it():
     clock = FakeClock()

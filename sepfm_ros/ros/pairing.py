@@ -3,7 +3,9 @@ reset when the input's stamps jump back. Pure Python, no ROS.
 
 A stamp that goes back by more than ``jump_back_s`` (a looped bag, a camera driver restart, a
 simulator reset) starts the pairing afresh from that frame, instead of dropping every later frame
-as late. A smaller step back is a reordered or repeated frame and is skipped as before.
+as late. A smaller step back is a reordered or repeated frame and is skipped as before. In stereo,
+each camera's stamps are compared with that camera's own newest, so one topic delivered seconds
+behind the other is not a jump back.
 """
 
 from __future__ import annotations
@@ -12,7 +14,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+from sepfm_ros.ros.sync import ApproximateTimeSync
 
 T = TypeVar("T")
 
@@ -40,16 +42,22 @@ class PairOutcome(Generic[T]):
 class StereoPairing(Generic[T]):
     """Left/right frames paired by stamp (:class:`ApproximateTimeSync`), reset on a jump back.
 
+    A frame whose stamp is more than ``jump_back_s`` older than its own side's newest starts the
+    pairing afresh. The other side's queued frames within ``jump_back_s`` of it (the new
+    timeline's, which that side may have sent first) are kept; the rest are dropped, and the
+    other side's newest is forgotten so that its own first frame of the new timeline is not a
+    second jump back.
+
     Args:
         slop_ns: largest stamp difference of a pair, ns.
         queue_size: unpaired frames kept per side.
-        jump_back_s: a stamp this much older than the newest seen resets the pairing, s.
+        jump_back_s: a stamp this much older than its side's newest resets the pairing, s.
     """
 
     def __init__(self, slop_ns: int, queue_size: int, jump_back_s: float = 1.0) -> None:
         self._sync: ApproximateTimeSync[Frame[T]] = ApproximateTimeSync(slop_ns, queue_size)
         self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
-        self._newest: int | None = None
+        self._newest: list[int | None] = [None, None]
         self._recent: tuple[deque[int], deque[int]] = (deque(maxlen=8), deque(maxlen=8))
 
     @property
@@ -68,19 +76,34 @@ class StereoPairing(Generic[T]):
             return None
         return min((r - s for r in right for s in left), key=abs)
 
+    def _restart(self, side: int, stamp_ns: int) -> None:
+        """A fresh sync holding only the other side's queued frames near ``stamp_ns``."""
+        other = 1 - side
+        kept = [
+            (s, item)
+            for s, item in self._sync.queued(other)
+            if abs(s - stamp_ns) <= self.jump_back_ns
+        ]
+        stats = self._sync.stats
+        self._sync = ApproximateTimeSync(self._sync.slop_ns, self._sync.queue_size)
+        self._sync.stats = stats  # counters stay lifetime counters
+        self._sync.requeue(other, kept)
+        self._recent[side].clear()
+        self._recent[other].clear()
+        self._recent[other].extend(s for s, _ in kept)
+        self._newest[side] = None
+        self._newest[other] = max((s for s, _ in kept), default=None)
+
     def add(self, side: int, frame: Frame[T]) -> PairOutcome[T]:
         """Add a frame of ``side`` (LEFT or RIGHT)."""
         out: PairOutcome[T] = PairOutcome()
         stamp = frame.stamp_ns
-        if self._newest is not None and stamp < self._newest - self.jump_back_ns:
-            stats = self._sync.stats
-            self._sync = ApproximateTimeSync(self._sync.slop_ns, self._sync.queue_size)
-            self._sync.stats = stats  # counters stay lifetime counters
-            self._recent[LEFT].clear()
-            self._recent[RIGHT].clear()
-            self._newest = None
+        newest = self._newest[side]
+        if newest is not None and stamp < newest - self.jump_back_ns:
+            self._restart(side, stamp)
             out.reset = True
-        self._newest = stamp if self._newest is None else max(self._newest, stamp)
+        newest = self._newest[side]
+        self._newest[side] = stamp if newest is None else max(newest, stamp)
         self._recent[side].append(stamp)
         late_before = self._sync.stats.late
         pair = self._sync.add(side, stamp, frame)

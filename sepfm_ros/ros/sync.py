@@ -71,6 +71,19 @@ class ApproximateTimeSync(Generic[T]):
         """Number of queued, unpaired items of ``side``."""
         return len(self._queues[side])
 
+    def queued(self, side: int) -> list[tuple[int, T]]:
+        """The queued, unpaired (stamp ns, item) of ``side``, oldest first."""
+        return list(self._queues[side])
+
+    def requeue(self, side: int, entries: list[tuple[int, T]]) -> None:
+        """Queue (stamp ns, item) entries of ``side`` again, as unpaired (not counted as
+        received): a restarted pairing keeps the frames it has not used yet."""
+        q = self._queues[side]
+        q.extend(sorted(entries, key=lambda e: e[0]))
+        while len(q) > self.queue_size:
+            q.popleft()
+            self.stats.evicted += 1
+
     def add(self, side: int, stamp_ns: int, item: T) -> tuple[T, T] | None:
         """Add an item of ``side`` (LEFT or RIGHT); return the (left, right) pair it completes."""
         if side not in (LEFT, RIGHT):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -16,7 +17,7 @@ from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry.pose import pose_from_projections
-from sepfm_ros.ros.bags.reader import RawMessage
+from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image
 
@@ -151,3 +152,47 @@ def test_motion_bag_says_stereo_is_needed(tmp_path):
     assert "no two image topics whose names differ by left/right" in r.stderr
     assert "--left TOPIC --right TOPIC (stereo input is needed here)" in r.stderr
     assert "--image" not in r.stderr
+
+
+def test_looped_bag_checks_every_pass(shared_data, tmp_path):
+    """A recording of a looped replay (stamps jump back 1.1 s to the start): the pairing
+    restarts as the node's does and every pass is checked, with a warning saying so."""
+    once = tmp_path / "once"
+    _write_kitti_bag(shared_data, once)
+    with BagReader(once) as reader:
+        msgs = list(reader.messages())
+    span = 2 * FRAMES * 100_000_000
+    looped = [RawMessage(m.topic, m.msgtype, m.log_time_ns + p * span, m.data) for p in (0, 1)
+              for m in msgs]  # fmt: skip
+    write_bag(tmp_path / "looped", looped)
+    out = tmp_path / "out"
+    r = _run(tmp_path / "looped", out)
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "1 jump(s) back of over 1 s" in r.stdout, r.stdout
+    assert f"[{2 * FRAMES}/{2 * FRAMES}]" in r.stdout and "decision: OK" in r.stdout
+    with (out / "calibration_check.csv").open() as f:
+        stamps = [int(row["stamp_ns"]) for row in csv.DictReader(f)]
+    assert stamps == 2 * [1_000_000_000 + k * 100_000_000 for k in range(FRAMES)]
+
+
+def test_sigint_stops_cleanly_between_pairs(shared_data, tmp_path):
+    bag = tmp_path / "kitti"
+    _write_kitti_bag(shared_data, bag)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sepfm_ros", "calibration_check", str(bag), "--out",
+         str(tmp_path / "out")],
+        cwd=REPO_ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        for line in proc.stdout:
+            if line.startswith(f"[2/{FRAMES}]"):
+                proc.send_signal(signal.SIGINT)
+                break
+        out, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    assert proc.returncode == 130, err
+    assert "calibration_check: interrupted" in err and "Traceback" not in err, err
+    assert f"[{FRAMES}/{FRAMES}]" not in out

@@ -64,15 +64,17 @@ def _input_bag_pairs(
 ) -> tuple[list[PairSpec], list[PairError]]:
     spec = detect_inputs(reader, None, topics.get("left"), topics.get("right"), topics.get("image"))
     params = parse_params([])
-    stamps = validate_inputs(reader, spec)
-    slop_ns = pairing_slop_ns(params, stamps[spec.topics[0]], False)
+    inputs = validate_inputs(reader, spec, params["stamp_jump_reset_s"])
+    slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], False)
     gt = read_ground_truth(bag)
     pairs, errors = [], []
     out = frames_dir / bag.name
     out.mkdir(parents=True, exist_ok=True)
     for job in iter_pairs(reader, spec, params, slop_ns):
         stamp = stamp_ns(job.header.stamp)
-        pid = f"{bag.name}@{format_stamp(stamp)}"
+        # a pass after a jump back of the stamps (a looped bag) gets its own ids
+        run = f"#{job.run + 1}" if job.run else ""
+        pid = f"{bag.name}@{format_stamp(stamp)}{run}"
         try:
             if stamp not in gt:
                 raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with stamp {stamp} ns")
@@ -80,7 +82,7 @@ def _input_bag_pairs(
             paths = []
             images = pair_to_numpy(job.msg_a, job.msg_b, "mono8")  # one contrast for the pair
             for tag, img in zip(("a", "b"), images, strict=True):
-                p = out / f"{stamp}_{tag}.png"
+                p = out / f"{stamp}{run}_{tag}.png"
                 if not cv2.imwrite(str(p), img):
                     raise PairDataError(f"cannot write decoded frame {p}")
                 paths.append(p)
@@ -94,7 +96,7 @@ def _input_bag_pairs(
 def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
     pairs, errors = [], []
     for fr in read_results(bag):
-        pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}"
+        pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}" + (f"#{fr.run + 1}" if fr.run else "")
         pts_a, pts_b = fr.pts()
         size_a, size_b = _size(fr.info.get("size_a", "")), _size(fr.info.get("size_b", ""))
         try:

@@ -46,9 +46,11 @@ from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
+from sepfm_ros.ros.pairing import Frame, StereoPairing
 from sepfm_ros.ros.parameters import parameter_error
 from sepfm_ros.ros.process import pairing_slop_ns, parse_params, validate_inputs
-from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
+from sepfm_ros.ros.sync import LEFT, RIGHT
 
 
 @dataclass
@@ -137,9 +139,12 @@ class _Rig:
         return self.calib
 
 
-def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
+def run_check(
+    args: argparse.Namespace, out=sys.stdout, stop: DeferredStop | None = None
+) -> list[PairRow]:
     """Check every stereo pair of the bag; print progress and figures. Raises BagError,
-    CalibrationError or ValueError on bad input."""
+    CalibrationError or ValueError on bad input; KeyboardInterrupt when ``stop`` was
+    requested (checked before each message)."""
     params = parse_params([])  # the node's pairing parameters, at their defaults
     if args.sync_slop is not None:
         error = parameter_error("sync_slop_s", args.sync_slop)
@@ -166,9 +171,11 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
                     f"{have or 'none'}; choose them with --left-info/--right-info)"
                 )
             reader.require(topic, (CAMERA_INFO,))
-        stamps = validate_inputs(reader, spec)
+        jump_s = params["stamp_jump_reset_s"]
+        inputs = validate_inputs(reader, spec, jump_s)
+        stamps = inputs.stamps
         slop_ns = pairing_slop_ns(params, stamps[left], args.sync_slop is not None)
-        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(slop_ns, params["sync_queue_size"])
+        pairing: StereoPairing[Any] = StereoPairing(slop_ns, params["sync_queue_size"], jump_s)
         total = min(len(stamps[left]), len(stamps[right]))
         if args.max_pairs:
             total = min(total, args.max_pairs)
@@ -181,17 +188,21 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
             f"{slop_ns / 1e6:.1f} ms, calibration from {left_info} and {right_info})",
             file=out,
         )
+        for line in inputs.warnings(jump_s):
+            print(line, file=out)
         ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
         for raw in reader.messages([left, right, left_info, right_info]):
+            if stop is not None:
+                stop.check()
             msg = reader.deserialize(raw)
             if raw.topic == left_info:
                 rig.infos["left"] = msg
             elif raw.topic == right_info:
                 rig.infos["right"] = msg
             else:
-                pair = sync.add(side_of[raw.topic], stamp_ns(msg.header.stamp), msg)
+                pair = pairing.add(side_of[raw.topic], Frame(msg, stamp_ns(msg.header.stamp))).pair
                 if pair is not None:
-                    ready.append((stamp_ns(pair[0].header.stamp), *pair))
+                    ready.append((pair[0].stamp_ns, pair[0].item, pair[1].item))
             while (
                 ready
                 and len(rig.infos) == 2
@@ -208,7 +219,7 @@ def run_check(args: argparse.Namespace, out=sys.stdout) -> list[PairRow]:
             missing = [s for s in ("left", "right") if s not in rig.infos]
             topics = [left_info if s == "left" else right_info for s in missing]
             raise CalibrationError(f"no camera_info message on {', '.join(topics)} in the bag")
-        if not rows and not sync.stats.pairs:
+        if not rows and not pairing.stats.pairs:
             raise BagError(
                 f"no stereo pairs: no {left} image has a {right} image within "
                 f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
@@ -285,6 +296,15 @@ def write_csv(rows: list[PairRow], path: Path) -> None:
             )
 
 
+def elapsed_s(stamps: list[int]) -> np.ndarray:
+    """(K,) seconds since the first of ``stamps`` (ns), counting a step back (the stamps
+    jumped back: a looped bag, a restarted driver) as one median forward step."""
+    steps = np.diff(np.asarray(stamps, dtype=np.int64)) / 1e9
+    forward = steps[steps > 0]
+    steps[steps <= 0] = float(np.median(forward)) if forward.size else 0.0
+    return np.concatenate([[0.0], np.cumsum(steps)])
+
+
 def write_plot(rows: list[PairRow], path: Path, config: MonitorConfig) -> None:
     """PNG of the per-pair epipolar error and rotation over time, thresholds and decisions."""
     import matplotlib
@@ -292,7 +312,7 @@ def write_plot(rows: list[PairRow], path: Path, config: MonitorConfig) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    t = np.array([(r.stamp_ns - rows[0].stamp_ns) / 1e9 for r in rows])
+    t = elapsed_s([r.stamp_ns for r in rows])
     epi = np.array([r.check.epipolar_median_px for r in rows])
     p90 = np.array([r.check.epipolar_p90_px for r in rows])
     rot = np.array([r.check.rotation_error_deg for r in rows])
@@ -323,14 +343,18 @@ def write_plot(rows: list[PairRow], path: Path, config: MonitorConfig) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parse(argv)
+    stop = DeferredStop()
+    previous = install_stop_handlers(stop)
     try:
-        rows = run_check(args)
+        rows = run_check(args, stop=stop)
     except (BagError, CalibrationError, ValueError) as err:
         print(f"calibration_check: {err}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         print("calibration_check: interrupted", file=sys.stderr)
         return 130
+    finally:
+        restore_handlers(previous)
     if not rows:
         print("calibration_check: no stereo pair could be decoded", file=sys.stderr)
         return 2

@@ -333,6 +333,7 @@ class SepfmNode(Node):
         stamp = stamp_ns(msg.header.stamp)
         with self._lock:
             out: PairOutcome = self._stereo.add(side, Frame((msg, received), stamp))
+            run = self._stereo.resets  # after a restart the same stamps may be other images
             offset = self._stereo.offset_ns()
         if offset is not None:
             self._health.stereo_offset(offset)
@@ -349,7 +350,7 @@ class SepfmNode(Node):
             return
         ns_l, ns_r = out.pair[0].stamp_ns, out.pair[1].stamp_ns
         header = copy_header(left.header)
-        job = Job(left, right, max(t_left, t_right), header, ("l", ns_l), ("r", ns_r))
+        job = Job(left, right, max(t_left, t_right), header, (run, "l", ns_l), (run, "r", ns_r))
         self._offer(job)
 
     @guarded
@@ -360,6 +361,7 @@ class SepfmNode(Node):
         stamp = stamp_ns(msg.header.stamp)
         with self._lock:
             out: PairOutcome = self._motion.add(Frame((msg, received), stamp))
+            run = self._motion.resets
         if out.reset:
             self._stamp_jumped("image", stamp)
         if out.late:
@@ -369,7 +371,14 @@ class SepfmNode(Node):
             return
         first = out.pair[0]
         self._offer(
-            Job(first.item[0], msg, received, copy_header(msg.header), first.stamp_ns, stamp)
+            Job(
+                first.item[0],
+                msg,
+                received,
+                copy_header(msg.header),
+                (run, first.stamp_ns),
+                (run, stamp),
+            )
         )
 
     # ---------------------------------------------------------------- workers

@@ -58,6 +58,7 @@ class StereoPairing(Generic[T]):
         self._sync: ApproximateTimeSync[Frame[T]] = ApproximateTimeSync(slop_ns, queue_size)
         self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
         self._newest: list[int | None] = [None, None]
+        self.resets = 0  #: restarts so far (a stamp of a frame is unique within one)
         self._recent: tuple[deque[int], deque[int]] = (deque(maxlen=8), deque(maxlen=8))
 
     @property
@@ -101,6 +102,7 @@ class StereoPairing(Generic[T]):
         newest = self._newest[side]
         if newest is not None and stamp < newest - self.jump_back_ns:
             self._restart(side, stamp)
+            self.resets += 1
             out.reset = True
         newest = self._newest[side]
         self._newest[side] = stamp if newest is None else max(newest, stamp)
@@ -123,6 +125,7 @@ class MotionPairing(Generic[T]):
 
     def __init__(self, frame_gap: int, jump_back_s: float = 1.0) -> None:
         self._history: deque[Frame[T]] = deque(maxlen=frame_gap + 1)
+        self.resets = 0  #: restarts so far (a stamp of a frame is unique within one)
         self.jump_back_ns = int(round(jump_back_s * NS_PER_S))
 
     @property
@@ -141,6 +144,7 @@ class MotionPairing(Generic[T]):
             last = self._history[-1].stamp_ns
             if frame.stamp_ns < last - self.jump_back_ns:
                 self._history.clear()
+                self.resets += 1
                 out.reset = True
             elif frame.stamp_ns <= last:
                 out.late = True

@@ -7,11 +7,15 @@ differ by left/right: stereo; the pick is printed) or, when the bag holds severa
 error lists its image topics. The images are paired as the node does (its approximate-time
 policy for stereo, frame t - ``frame_gap`` and t for motion), except that stereo pairs form
 within half the left frame period unless ``-p sync_slop_s:=...`` is given, so a right camera that
-lags by 10-20 ms still pairs. The command runs the node's
+lags by 10-20 ms still pairs. Irregular header stamps are handled as the node handles them, with
+a warning per topic: a frame whose stamp repeats or steps back is skipped, and a jump back of
+more than ``stamp_jump_reset_s`` (a looped bag, a restarted driver) restarts the pairing there.
+The command runs the node's
 :class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the same parameters (``-p name:=value``,
 the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
 the node's outputs with the source stamps to OUT: ``/sepfm/fundamental``, ``/sepfm/matches``,
-``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it).
+``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it), logged at
+the log time of the input message that completed each pair, so OUT plays in step with BAG.
 
 A progress bar runs on stderr (``--print-done`` also prints a line ``done K/N STAMP`` on stdout for
 each pair once its results are safely in OUT, for programs that watch the progress); at the end a
@@ -29,7 +33,6 @@ import argparse
 import bisect
 import sys
 import time
-from collections import deque
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
@@ -44,7 +47,7 @@ from tqdm import tqdm
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
-from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.reader import BagReader, StampReport, stamp_irregularities
 from sepfm_ros.ros.bags.types import (
     CAMERA_INFO,
     DIAGNOSTIC_ARRAY,
@@ -65,6 +68,7 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
+from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
@@ -75,8 +79,8 @@ from sepfm_ros.ros.results import (
     read_results,
     summarize,
 )
-from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
-from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
+from sepfm_ros.ros.sync import LEFT, RIGHT
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
 _ZERO = _QosTime(0, 0)
@@ -96,13 +100,43 @@ OUTPUT_QOS = Qos(
 
 @dataclass
 class PairJob:
-    """One pair, as the node's worker gets it (a = left/earlier, b = right/current)."""
+    """One pair, as the node's worker gets it (a = left/earlier, b = right/current).
+
+    ``log_time_ns``: the bag's log time of the message that completed the pair; ``run``: how
+    many times the pairing restarted before it (the input's stamps jumped back).
+    """
 
     msg_a: Any
     msg_b: Any
     header: Any
     key_a: Any
     key_b: Any
+    log_time_ns: int = 0
+    run: int = 0
+
+
+@dataclass
+class InputStamps:
+    """The input topics' header stamps (ns, bag order) and their irregularities."""
+
+    stamps: dict[str, list[int]]
+    reports: dict[str, StampReport]
+
+    def warnings(self, jump_back_s: float) -> list[str]:
+        """One line per topic whose stamps repeat, go back or jump back, saying what the
+        pairing does with them (what the node does)."""
+        lines = []
+        for topic, r in self.reports.items():
+            if not (r.repeated or r.backwards):
+                continue
+            small = r.backwards - r.jumps_back
+            lines.append(
+                f"warning: {topic}: {r.repeated} repeated header stamp(s) and {small} step(s) "
+                f"back: those frames are skipped; {r.jumps_back} jump(s) back of over "
+                f"{jump_back_s:g} s (a looped bag, a restarted driver): the pairing restarts "
+                "there, as the node does"
+            )
+        return lines
 
 
 def iter_pairs(
@@ -110,58 +144,66 @@ def iter_pairs(
 ) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
-    ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
-    Raises StampOrderError when an input topic's header stamps repeat or go backwards.
+    Pairing is the node's (:mod:`sepfm_ros.ros.pairing`): a frame whose stamp is not after its
+    topic's newest is skipped, a jump back of more than ``stamp_jump_reset_s`` restarts the
+    pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
     msg_class = CompressedImage if spec.transport == "compressed" else Image
-    checker = StampChecker()
+    jump_s = float(params["stamp_jump_reset_s"])
     if spec.mode == "stereo":
         if slop_ns is None:
             slop_ns = int(round(params["sync_slop_s"] * 1e9))
-        sync: ApproximateTimeSync[Any] = ApproximateTimeSync(
-            slop_ns, int(params["sync_queue_size"])
-        )
-        for i, raw in enumerate(reader.messages(spec.topics)):
+        stereo: StereoPairing[Any] = StereoPairing(slop_ns, int(params["sync_queue_size"]), jump_s)
+        for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
-            stamp = stamp_ns(msg.header.stamp)
-            checker.check(raw.topic, stamp, i)
             side = LEFT if raw.topic == spec.topics[0] else RIGHT
-            pair = sync.add(side, stamp, msg)
-            if pair is None:
+            out = stereo.add(side, Frame(msg, stamp_ns(msg.header.stamp)))
+            run = stereo.resets
+            if out.pair is None:
                 continue
-            left, right = pair
+            left, right = out.pair[0].item, out.pair[1].item
             yield PairJob(
                 left,
                 right,
                 copy_header(left.header),
-                ("l", stamp_ns(left.header.stamp)),
-                ("r", stamp_ns(right.header.stamp)),
+                (run, "l", out.pair[0].stamp_ns),
+                (run, "r", out.pair[1].stamp_ns),
+                raw.log_time_ns,
+                run,
             )
     else:
-        gap = int(params["frame_gap"])
-        history: deque[tuple[Any, int]] = deque(maxlen=gap + 1)
-        for i, raw in enumerate(reader.messages(spec.topics)):
+        motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
+        for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
-            stamp = stamp_ns(msg.header.stamp)
-            checker.check(raw.topic, stamp, i)
-            history.append((msg, stamp))
-            if len(history) == history.maxlen:
-                first = history[0]
-                yield PairJob(first[0], msg, copy_header(msg.header), first[1], stamp)
+            out = motion.add(Frame(msg, stamp_ns(msg.header.stamp)))
+            run = motion.resets
+            if out.pair is None:
+                continue
+            first, current = out.pair
+            yield PairJob(
+                first.item,
+                msg,
+                copy_header(msg.header),
+                (run, first.stamp_ns),
+                (run, current.stamp_ns),
+                raw.log_time_ns,
+                run,
+            )
 
 
-def validate_inputs(reader: BagReader, spec: InputSpec) -> dict[str, list[int]]:
-    """Scan the input topics' header stamps before any output exists; the stamps per topic (ns).
+def validate_inputs(reader: BagReader, spec: InputSpec, jump_back_s: float = 1.0) -> InputStamps:
+    """Scan the input topics' header stamps before any output exists.
 
-    Raises StampOrderError (repeated or backwards stamps) or BagCorruptError (unreadable data).
+    Raises BagCorruptError (unreadable data). Irregular stamps are counted
+    (:func:`~sepfm_ros.ros.bags.reader.stamp_irregularities`), not refused: the pairing skips
+    or restarts on them as the node does.
     """
-    checker = StampChecker()
     stamps: dict[str, list[int]] = {t: [] for t in spec.topics}
-    for i, raw in enumerate(reader.messages(spec.topics)):
-        stamp = header_stamp_ns(raw.data)
-        checker.check(raw.topic, stamp, i)
-        stamps[raw.topic].append(stamp)
-    return stamps
+    for raw in reader.messages(spec.topics):
+        stamps[raw.topic].append(header_stamp_ns(raw.data))
+    jump_ns = int(round(jump_back_s * 1e9))
+    reports = {t: stamp_irregularities(s, jump_back_ns=jump_ns) for t, s in stamps.items()}
+    return InputStamps(stamps, reports)
 
 
 def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:
@@ -176,7 +218,9 @@ def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: 
     slop = int(round(params["sync_slop_s"] * 1e9))
     if slop_given or len(left_stamps) < 2:
         return slop
-    steps = sorted(b - a for a, b in zip(left_stamps, left_stamps[1:], strict=False))
+    steps = sorted(b - a for a, b in zip(left_stamps, left_stamps[1:], strict=False) if b > a)
+    if not steps:
+        return slop
     return max(slop, steps[len(steps) // 2] // 2 - 1)
 
 
@@ -264,6 +308,7 @@ def run_process(
     right: str | None = None,
     image: str | None = None,
     slop_given: bool = False,
+    stop: DeferredStop | None = None,
 ) -> tuple[int, int]:
     """Process ``bag`` into a new bag ``out``; returns (pairs processed, pairs expected).
 
@@ -276,7 +321,8 @@ def run_process(
     (they survive any interruption from then on).
 
     Raises BagError subclasses on bad input; KeyboardInterrupt propagates after ``out`` is closed
-    (readable, holding every result so far).
+    (readable, holding every result so far). ``stop``: a deferred stop request, checked before
+    each pair (see :class:`~sepfm_ros.ros.signals.DeferredStop`).
     """
     check_output_path(out)
     topics = output_topics(namespace)
@@ -286,10 +332,14 @@ def run_process(
         raise BagError(str(err)) from None
     with BagReader(bag) as reader:
         spec = detect_inputs(reader, mode, left, right, image)
-        stamps = validate_inputs(reader, spec)
+        inputs = validate_inputs(reader, spec, params["stamp_jump_reset_s"])
+        if stop is not None:
+            stop.check()
         slop_ns = None
         if spec.mode == "stereo":
-            slop_ns = pairing_slop_ns(params, stamps[spec.topics[0]], slop_given)
+            slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], slop_given)
+        for line in inputs.warnings(params["stamp_jump_reset_s"]):
+            print(f"sepfm_ros process: {line}", file=sys.stderr, flush=True)
         if spec.picked:
             print(
                 f"sepfm_ros process: input {spec.describe()} (picked from the bag's image "
@@ -342,11 +392,13 @@ def run_process(
             )
             try:
                 for job in iter_pairs(reader, spec, params, slop_ns):
+                    if stop is not None:
+                        stop.check()
                     calib = None
                     if calibrated is not None:
                         calib = (calibrated, infos.at(stamp_ns(job.header.stamp)))
                     for data in process_pair(pipeline, job, params, topics, calib):
-                        writer.write(data[0], stamp_ns(job.header.stamp), data[1])
+                        writer.write(data[0], job.log_time_ns, data[1])
                     writer.flush()  # every result survives a kill from now on
                     done += 1
                     bar.update(1)
@@ -473,7 +525,8 @@ def print_done(k: int, total: int, stamp: int) -> None:
 
 def main(argv: list[str]) -> int:
     args = _parse(argv)
-    previous = install_stop_handlers()
+    stop = DeferredStop()
+    previous = install_stop_handlers(stop)
     interrupted = False
     try:
         params = parse_params(args.param)
@@ -488,6 +541,7 @@ def main(argv: list[str]) -> int:
             right=args.right,
             image=args.image,
             slop_given=any(p.startswith("sync_slop_s:=") for p in args.param),
+            stop=stop,
         )
     except BagError as err:
         print(f"sepfm_ros process: error: {err}", file=sys.stderr)

@@ -69,6 +69,7 @@ class FrameResult:
     """The node's outputs for one stamp (the newer image's stamp)."""
 
     stamp_ns: int
+    run: int = 0  # the input's stamps jumped back this many times before it (a looped bag)
     F: np.ndarray | None = None
     cloud: np.ndarray | None = None  # structured MATCH_DTYPE array
     info: dict[str, str] = field(default_factory=dict)
@@ -109,32 +110,42 @@ class FrameResult:
 def read_results(
     bag: str | Path, namespace: str = OUTPUT_NAMESPACE, gt_bag: str | Path | None = None
 ) -> list[FrameResult]:
-    """Per-stamp outputs found in ``bag`` (sorted by stamp), with GT from ``gt_bag`` or ``bag``."""
-    topics = output_topics(namespace)
-    frames: dict[int, FrameResult] = {}
+    """Per-pair outputs found in ``bag`` (by run, then stamp), with GT from ``gt_bag`` or ``bag``.
 
-    def frame(stamp: int) -> FrameResult:
-        return frames.setdefault(stamp, FrameResult(stamp))
+    The node and ``process`` publish each output topic's pairs in increasing stamp order; a
+    stamp at or before the topic's previous one means they restarted their pairing (a looped
+    bag, a restarted driver) and starts a new run, so the passes of a looped bag stay apart.
+    """
+    topics = output_topics(namespace)
+    frames: dict[tuple[int, int], FrameResult] = {}
+    runs: dict[str, tuple[int, int]] = {}  # topic -> (run, previous stamp)
+
+    def frame(topic: str, stamp: int) -> FrameResult:
+        run, previous = runs.get(topic, (0, stamp - 1))
+        if stamp <= previous:
+            run += 1
+        runs[topic] = (run, stamp)
+        return frames.setdefault((run, stamp), FrameResult(stamp, run))
 
     with BagReader(bag) as reader:
         wanted = [t for t in topics.values() if t in reader.topics]
         for msg in reader.messages(wanted):
             if msg.topic == topics["fundamental"]:
                 m = deserialize_message(msg.data, Image)
-                frame(stamp_ns(m.header.stamp)).F = fundamental_from_image(m)
+                frame(msg.topic, stamp_ns(m.header.stamp)).F = fundamental_from_image(m)
             elif msg.topic == topics["matches"]:
                 m = deserialize_message(msg.data, PointCloud2)
-                frame(stamp_ns(m.header.stamp)).cloud = matches_from_pointcloud2(m)
+                frame(msg.topic, stamp_ns(m.header.stamp)).cloud = matches_from_pointcloud2(m)
             else:
                 m = deserialize_message(msg.data, DiagnosticArray)
                 for st in m.status:
                     if st.name == ESTIMATE_STATUS_NAME:
-                        frame(stamp_ns(m.header.stamp)).info = status_values(st)
+                        frame(msg.topic, stamp_ns(m.header.stamp)).info = status_values(st)
     gt = read_ground_truth(gt_bag if gt_bag is not None else bag)
-    for stamp, F_gt in gt.items():
-        if stamp in frames:
-            frames[stamp].F_gt = F_gt
-    return [frames[s] for s in sorted(frames)]
+    for (_, stamp), fr in frames.items():
+        if stamp in gt:
+            fr.F_gt = gt[stamp]
+    return [frames[k] for k in sorted(frames)]
 
 
 def read_ground_truth(bag: str | Path) -> dict[int, np.ndarray]:
@@ -159,7 +170,8 @@ def format_table(results: list[FrameResult]) -> str:
     rows = [head, "-" * len(head)]
     for r in results:
         rows.append(
-            f"{format_stamp(r.stamp_ns):>21} {r.matches:>7d} {r.inliers:>7d} "
+            f"{format_stamp(r.stamp_ns) + (f' #{r.run + 1}' if r.run else ''):>21} "
+            f"{r.matches:>7d} {r.inliers:>7d} "
             f"{r.hypotheses:>6d} {'yes' if r.F is not None else 'no':>3} "
             f"{_fmt_err(r.error_px):>7}  {r.status}"
         )

@@ -18,9 +18,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from rclpy.serialization import serialize_message
 from robot_bags import FORMATS, LEFT_TOPIC, RIGHT_TOPIC, bag_path, write_robot_bag
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
+from std_msgs.msg import Header
 
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.bags import load_bag_pairs
@@ -28,10 +30,13 @@ from sepfm_ros.geometry import fundamental_from_cameras
 from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, TopicNotFoundError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.bags.types import header_stamp_ns
+from sepfm_ros.ros.bags.types import IMAGE, header_stamp_ns
+from sepfm_ros.ros.bags.writer import BagWriter
+from sepfm_ros.ros.image_conversion import numpy_to_image
 from sepfm_ros.ros.make_bag import SourceFrame, make_bag
 from sepfm_ros.ros.process import parse_params, run_process
-from sepfm_ros.ros.results import read_results
+from sepfm_ros.ros.results import gt_error_px, read_results
+from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
 REPO = Path(__file__).resolve().parent.parent
 N_PAIRS = 4
@@ -300,3 +305,28 @@ def test_calibration_check_on_a_lagging_ros1_robot_bag(kitti_frames, shared_data
     assert res.returncode == 0, res.stdout + res.stderr
     assert f"{LEFT_TOPIC} + {RIGHT_TOPIC}, picked" in res.stdout
     assert f"[{N_PAIRS}/{N_PAIRS}]" in res.stdout and "decision: OK" in res.stdout
+
+
+def test_process_a_rig_of_two_different_cameras(tmp_path, capsys):
+    """Left 480x360 and right 400x300, each with its own K (an RGB camera beside a mono one):
+    every pair is processed, F accurate against the rig's cameras."""
+    frames = stereo_sequence(n_frames=3, right_size=(400, 300), seed=5)
+    bag = tmp_path / "rig"
+    with BagWriter(bag) as writer:
+        for side in ("left", "right"):
+            writer.add_topic(f"/rig/{side}/image_raw", IMAGE)
+        for k, frame in enumerate(frames):
+            stamp = 1_000_000_000 + k * 100_000_000
+            for side, img in zip(("left", "right"), frame.images, strict=True):
+                header = Header(frame_id=f"{side}_optical_frame")
+                header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+                msg = serialize_message(numpy_to_image(img, "mono8", header))
+                writer.write(f"/rig/{side}/image_raw", stamp, msg)
+    done, total = run_process(bag, tmp_path / "out", parse_params(PARAMS), progress=False)
+    assert done == total == len(frames)
+    assert "skipping" not in capsys.readouterr().err
+    results = read_results(tmp_path / "out")
+    assert len(results) == len(frames)
+    for r, frame in zip(results, frames, strict=True):
+        assert r.status == "ok" and r.info["size_b"] == "400x300"
+        assert gt_error_px(r.F, pair_fundamental(*frame.cameras), *r.pts()) < 1.0

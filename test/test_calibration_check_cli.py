@@ -20,6 +20,7 @@ from sepfm_ros.geometry.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image
+from sepfm_ros.synthetic.sequences import stereo_sequence
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 FRAMES = 12
@@ -196,3 +197,44 @@ def test_sigint_stops_cleanly_between_pairs(shared_data, tmp_path):
     assert proc.returncode == 130, err
     assert "calibration_check: interrupted" in err and "Traceback" not in err, err
     assert f"[{FRAMES}/{FRAMES}]" not in out
+
+
+def _rig_infos(cam_a, cam_b) -> tuple[CameraInfo, CameraInfo]:
+    """CameraInfo of a raw (unrectified) rig in the stereo_image_proc convention: the common
+    rectified orientation is the left camera's, so R_a = I, R_b = R^T and P_b = K_a [I | R^T t]
+    for the pose X_b = R X_a + t of the two synthetic cameras."""
+    R = cam_b.R @ cam_a.R.T
+    t = cam_b.t - R @ cam_a.t
+    out = []
+    for cam, R_rect, t_rect in ((cam_a, np.eye(3), np.zeros(3)), (cam_b, R.T, R.T @ t)):
+        msg = CameraInfo(width=cam.size[0], height=cam.size[1], distortion_model="plumb_bob")
+        msg.d = [0.0] * 5
+        msg.k = np.asarray(cam.K, float).ravel().tolist()
+        msg.r = R_rect.ravel().tolist()
+        msg.p = (cam_a.K @ np.c_[np.eye(3), t_rect]).ravel().tolist()
+        out.append(msg)
+    return out[0], out[1]
+
+
+def test_rig_of_two_cameras_of_different_sizes(tmp_path):
+    """Left 480x360 and right 400x300 with their own K: each camera's camera_info is checked
+    against its own image size, and the true calibration is OK."""
+    frames = stereo_sequence(n_frames=8, right_size=(400, 300), seed=6)
+    infos = _rig_infos(*frames[0].cameras)
+    msgs = []
+    for k, frame in enumerate(frames):
+        stamp = 1_000_000_000 + k * 100_000_000
+        for side, img, info in zip(("left", "right"), frame.images, infos, strict=True):
+            header = Header(frame_id=f"{side}_optical_frame")
+            header.stamp.sec, header.stamp.nanosec = divmod(stamp, 1_000_000_000)
+            img_msg = serialize_message(numpy_to_image(img, "mono8", header))
+            msgs.append(RawMessage(f"/{side}/image_raw", IMAGE, stamp, img_msg))
+            info.header = header
+            msgs.append(RawMessage(f"/{side}/camera_info", INFO, stamp, serialize_message(info)))
+    write_bag(tmp_path / "rig", msgs)
+    r = _run(tmp_path / "rig", tmp_path / "out")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert f"[{len(frames)}/{len(frames)}]" in r.stdout and "decision: OK" in r.stdout
+    with (tmp_path / "out" / "calibration_check.csv").open() as f:
+        medians = [float(row["epipolar_median_px"]) for row in csv.DictReader(f)]
+    assert len(medians) == len(frames) and max(medians) < 1.0, medians

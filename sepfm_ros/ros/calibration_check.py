@@ -120,7 +120,8 @@ class _Rig:
         self._key: tuple | None = None
         self.calib: StereoCalibration | None = None
 
-    def calibration(self, size: tuple[int, int]) -> StereoCalibration:
+    def calibration(self, size_l: tuple[int, int], size_r: tuple[int, int]) -> StereoCalibration:
+        """The rig's calibration for images of (width, height) ``size_l`` and ``size_r``."""
         left, right = self.infos.get("left"), self.infos.get("right")
         if left is None or right is None:
             raise CalibrationError(
@@ -129,10 +130,10 @@ class _Rig:
         key = tuple(
             (tuple(np.ravel(m.k)), tuple(np.ravel(m.d)), tuple(np.ravel(m.r)), tuple(np.ravel(m.p)))
             for m in (left, right)
-        ) + (size,)
+        ) + (size_l, size_r)
         if key != self._key:
-            ma = camera_model_from_info(left, size)
-            mb = camera_model_from_info(right, size)
+            ma = camera_model_from_info(left, size_l)
+            mb = camera_model_from_info(right, size_r)
             self.calib = StereoCalibration.from_models(ma, mb, self.rectified)
             self._key = key
         assert self.calib is not None
@@ -243,7 +244,9 @@ def _check_one(
     except ImageDecodeError as err:
         print(f"pair at {format_stamp(stamp)}: skipped, {err}", file=out)
         return None
-    calib = rig.calibration((int(img_l.shape[1]), int(img_l.shape[0])))
+    calib = rig.calibration(
+        (int(img_l.shape[1]), int(img_l.shape[0])), (int(img_r.shape[1]), int(img_r.shape[0]))
+    )
     result = pipeline.process(img_l, img_r, cameras=(calib.model_a, calib.model_b))
     check = check_pair(
         calib,

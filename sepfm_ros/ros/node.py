@@ -342,12 +342,6 @@ class SepfmNode(Node):
         if out.pair is None:
             return
         (left, t_left), (right, t_right) = out.pair[0].item, out.pair[1].item
-        if self._transport == "raw" and (left.width, left.height) != (right.width, right.height):
-            self._bad_input(
-                "size_mismatch",
-                f"left {left.width}x{left.height} and right {right.width}x{right.height} differ",
-            )
-            return
         ns_l, ns_r = out.pair[0].stamp_ns, out.pair[1].stamp_ns
         header = copy_header(left.header)
         job = Job(left, right, max(t_left, t_right), header, (run, "l", ns_l), (run, "r", ns_r))
@@ -439,10 +433,13 @@ class SepfmNode(Node):
         t0 = time.perf_counter()
         image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
         decode_ms = (time.perf_counter() - t0) * 1e3
-        if image_a.shape != image_b.shape:
+        if self._mode == "motion" and image_a.shape != image_b.shape:
+            # one camera whose resolution changed: the two frames are not one camera's views
+            # (a stereo rig's two cameras may differ: F relates any two)
             raise ImageDecodeError(
                 "size_mismatch",
-                f"images of a pair differ in size: {image_a.shape[::-1]} vs {image_b.shape[::-1]}",
+                f"the camera's frame size changed from {image_a.shape[1::-1]} to "
+                f"{image_b.shape[1::-1]}",
             )
         matched = self._pipeline.match(
             image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}

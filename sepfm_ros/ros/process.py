@@ -103,7 +103,8 @@ class PairJob:
     """One pair, as the node's worker gets it (a = left/earlier, b = right/current).
 
     ``log_time_ns``: the bag's log time of the message that completed the pair; ``run``: how
-    many times the pairing restarted before it (the input's stamps jumped back).
+    many times the pairing restarted before it (the input's stamps jumped back); ``stereo``:
+    two cameras (whose image sizes may differ), else one camera's frames.
     """
 
     msg_a: Any
@@ -113,6 +114,7 @@ class PairJob:
     key_b: Any
     log_time_ns: int = 0
     run: int = 0
+    stereo: bool = False
 
 
 @dataclass
@@ -170,6 +172,7 @@ def iter_pairs(
                 (run, "r", out.pair[1].stamp_ns),
                 raw.log_time_ns,
                 run,
+                stereo=True,
             )
     else:
         motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
@@ -431,9 +434,10 @@ def process_pair(
         )
         return []
     decode_ms = (time.perf_counter() - t0) * 1e3
-    if image_a.shape != image_b.shape:
+    if not job.stereo and image_a.shape != image_b.shape:
         print(
-            f"\nskipping a pair: image sizes differ {image_a.shape} vs {image_b.shape}",
+            f"\nskipping a pair: the camera's frame size changed from {image_a.shape[1::-1]} "
+            f"to {image_b.shape[1::-1]}",
             file=sys.stderr,
         )
         return []

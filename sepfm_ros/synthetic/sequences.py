@@ -64,15 +64,18 @@ def stereo_sequence(
     speed_m: float = 0.15,
     seed: int = 0,
     color: bool = False,
+    right_size: tuple[int, int] | None = None,
 ) -> list[Frame]:
     """A stereo rig driving forward through :func:`street_scene`.
 
     The rig is slightly converged (``toe_in_deg`` per camera) and the right camera a little
     lower, so F is a general rank-2 matrix rather than the rectified one. ``speed_m`` metres per
-    frame along +z with a gentle sway.
+    frame along +z with a gentle sway. ``right_size``: the right camera's (width, height) when
+    the rig pairs two different cameras (same 70 degree field of view), else ``size``.
     """
     scene = street_scene(seed, color)
-    K = intrinsics(size, 70.0)
+    sizes = {"left": size, "right": right_size or size}
+    Ks = {side: intrinsics(sz, 70.0) for side, sz in sizes.items()}
     frames = []
     for k in range(n_frames):
         c = np.array([0.25 * np.sin(0.4 * k), -0.05 * np.cos(0.3 * k), speed_m * k])
@@ -87,7 +90,7 @@ def stereo_sequence(
                 [[np.cos(yaw), 0, np.sin(yaw)], [0, 1, 0], [-np.sin(yaw), 0, np.cos(yaw)]]
             )
             Rc = Ry @ R
-            cams.append(Camera(K, Rc, -Rc @ cw, size))
+            cams.append(Camera(Ks[side], Rc, -Rc @ cw, sizes[side]))
         images = tuple(render(scene, cam, color=color) for cam in cams)
         frames.append(Frame(images, tuple(cams)))
     return frames

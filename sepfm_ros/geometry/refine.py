@@ -33,7 +33,10 @@ def _weighted_design(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndar
         r = R[:, k]
         # w_k kron([u, v, 1], [x, y, 1]) = kron([w_k u, w_k v, w_k], [x, y, 1])
         design_row(x1[i, 0], x1[i, 1], wk * x2[i, 0], wk * x2[i, 1], r)
-        r[6:] *= wk
+        # (entry by entry: a slice update ``r[6:] *= wk`` allocates a temporary per row)
+        r[6] *= wk
+        r[7] *= wk
+        r[8] *= wk
 
 
 #: Inverse iteration of :func:`smallest_eigenvector`: most steps, and the agreement of two

@@ -9,7 +9,7 @@ from types import SimpleNamespace
 import pytest
 
 from sepfm_ros.ros.health import ERROR, OK, WARN, Health, LogThrottle, RecentEvents
-from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing
+from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
 from sepfm_ros.ros.scheduling import PairScheduler
 from sepfm_ros.ros.sync import LEFT, RIGHT
 
@@ -141,6 +141,17 @@ def test_stereo_pairing_reset_keeps_the_other_sides_new_frames():
     out = pairing.add(LEFT, Frame("l2", 10 * S + 200 * MS))
     assert out.reset and out.pair is not None
     assert (out.pair[0].item, out.pair[1].item) == ("l2", "r2")
+
+
+def test_stamp_order_effects_counts_what_the_pairing_skips_and_restarts_on():
+    ms = [int(v * 1e9) for v in (1.0, 1.4, 1.2, 1.3, 1.6)]  # 1.2 and 1.3: not after 1.4
+    assert stamp_order_effects(ms) == (2, 0)
+    looped = [int(v * 1e9) for v in (0.0, 0.5, 1.0, 1.5, 0.0, 0.5, 0.5, 1.0)]
+    assert stamp_order_effects(looped) == (1, 1)  # the restart, then a repeat
+    assert stamp_order_effects(looped, jump_back_s=2.0) == (4, 0)  # 0.0, 0.5, 0.5, 1.0 late
+    pairing: MotionPairing[int] = MotionPairing(frame_gap=1, jump_back_s=1.0)
+    outs = [pairing.add(Frame(k, s)) for k, s in enumerate(looped)]
+    assert (sum(o.late for o in outs), sum(o.reset for o in outs)) == (1, 1)
 
 
 # --------------------------------------------------------------------------- scheduler

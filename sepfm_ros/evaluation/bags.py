@@ -64,7 +64,7 @@ def _input_bag_pairs(
 ) -> tuple[list[PairSpec], list[PairError]]:
     spec = detect_inputs(reader, None, topics.get("left"), topics.get("right"), topics.get("image"))
     params = parse_params([])
-    inputs = validate_inputs(reader, spec, params["stamp_jump_reset_s"])
+    inputs = validate_inputs(reader, spec)
     slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], False)
     gt = read_ground_truth(bag)
     pairs, errors = [], []

@@ -173,7 +173,7 @@ def run_check(
                 )
             reader.require(topic, (CAMERA_INFO,))
         jump_s = params["stamp_jump_reset_s"]
-        inputs = validate_inputs(reader, spec, jump_s)
+        inputs = validate_inputs(reader, spec)
         stamps = inputs.stamps
         slop_ns = pairing_slop_ns(params, stamps[left], args.sync_slop is not None)
         pairing: StereoPairing[Any] = StereoPairing(slop_ns, params["sync_queue_size"], jump_s)

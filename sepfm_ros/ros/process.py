@@ -47,7 +47,7 @@ from tqdm import tqdm
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
-from sepfm_ros.ros.bags.reader import BagReader, StampReport, stamp_irregularities
+from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import (
     CAMERA_INFO,
     DIAGNOSTIC_ARRAY,
@@ -68,7 +68,7 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
-from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing
+from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
@@ -119,25 +119,22 @@ class PairJob:
 
 @dataclass
 class InputStamps:
-    """The input topics' header stamps (ns, bag order) and their irregularities."""
+    """The input topics' header stamps (ns, bag order)."""
 
     stamps: dict[str, list[int]]
-    reports: dict[str, StampReport]
 
     def warnings(self, jump_back_s: float) -> list[str]:
-        """One line per topic whose stamps repeat, go back or jump back, saying what the
-        pairing does with them (what the node does)."""
+        """One line per topic whose stamps repeat, step back or jump back, saying what the
+        pairing (the node's) does with them."""
         lines = []
-        for topic, r in self.reports.items():
-            if not (r.repeated or r.backwards):
-                continue
-            small = r.backwards - r.jumps_back
-            lines.append(
-                f"warning: {topic}: {r.repeated} repeated header stamp(s) and {small} step(s) "
-                f"back: those frames are skipped; {r.jumps_back} jump(s) back of over "
-                f"{jump_back_s:g} s (a looped bag, a restarted driver): the pairing restarts "
-                "there, as the node does"
-            )
+        for topic, stamps in self.stamps.items():
+            skipped, restarts = stamp_order_effects(stamps, jump_back_s)
+            if skipped or restarts:
+                lines.append(
+                    f"warning: {topic}: {skipped} frame(s) whose header stamp is not after the "
+                    f"newest are skipped and {restarts} jump(s) back of over {jump_back_s:g} s "
+                    "(a looped bag, a restarted driver) restart the pairing, as in the node"
+                )
         return lines
 
 
@@ -194,19 +191,16 @@ def iter_pairs(
             )
 
 
-def validate_inputs(reader: BagReader, spec: InputSpec, jump_back_s: float = 1.0) -> InputStamps:
+def validate_inputs(reader: BagReader, spec: InputSpec) -> InputStamps:
     """Scan the input topics' header stamps before any output exists.
 
-    Raises BagCorruptError (unreadable data). Irregular stamps are counted
-    (:func:`~sepfm_ros.ros.bags.reader.stamp_irregularities`), not refused: the pairing skips
-    or restarts on them as the node does.
+    Raises BagCorruptError (unreadable data). Irregular stamps are not refused: the pairing
+    skips or restarts on them as the node does (:meth:`InputStamps.warnings`).
     """
     stamps: dict[str, list[int]] = {t: [] for t in spec.topics}
     for raw in reader.messages(spec.topics):
         stamps[raw.topic].append(header_stamp_ns(raw.data))
-    jump_ns = int(round(jump_back_s * 1e9))
-    reports = {t: stamp_irregularities(s, jump_back_ns=jump_ns) for t, s in stamps.items()}
-    return InputStamps(stamps, reports)
+    return InputStamps(stamps)
 
 
 def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:
@@ -335,7 +329,7 @@ def run_process(
         raise BagError(str(err)) from None
     with BagReader(bag) as reader:
         spec = detect_inputs(reader, mode, left, right, image)
-        inputs = validate_inputs(reader, spec, params["stamp_jump_reset_s"])
+        inputs = validate_inputs(reader, spec)
         if stop is not None:
             stop.check()
         slop_ns = None

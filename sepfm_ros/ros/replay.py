@@ -31,6 +31,7 @@ import sys
 import threading
 import time
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -42,14 +43,44 @@ from tqdm import tqdm
 
 from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeError
 from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
-from sepfm_ros.ros.bags.reader import (
-    BagReader,
-    StampChecker,
-    StampReport,
-    stamp_irregularities,
-)
+from sepfm_ros.ros.bags.reader import BagReader, StampChecker
 from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
 from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
+
+GAP_FACTOR = 3.0
+
+
+@dataclass
+class StampReport:
+    """Header-stamp irregularities of one topic: counts of repeats, steps back and gaps."""
+
+    messages: int = 0
+    repeated: int = 0
+    backwards: int = 0
+    gaps: int = 0
+    largest_gap_s: float = 0.0
+
+    @property
+    def irregular(self) -> bool:
+        return bool(self.repeated or self.backwards or self.gaps)
+
+
+def stamp_irregularities(stamps: Sequence[int], gap_factor: float = GAP_FACTOR) -> StampReport:
+    """Count repeated, backwards and gap intervals in a topic's header stamps (ns, bag order).
+
+    A gap is a forward step longer than ``gap_factor`` times the median forward step.
+    """
+    report = StampReport(messages=len(stamps))
+    steps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+    report.repeated = sum(1 for d in steps if d == 0)
+    report.backwards = sum(1 for d in steps if d < 0)
+    forward = sorted(d for d in steps if d > 0)
+    if forward:
+        median = forward[len(forward) // 2]
+        big = [d for d in forward if d > gap_factor * median]
+        report.gaps = len(big)
+        report.largest_gap_s = max(big, default=0) / 1e9
+    return report
 
 
 def message_class(msgtype: str) -> Any:

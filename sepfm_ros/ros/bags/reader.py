@@ -1,5 +1,4 @@
-"""Reading bags with typed errors: :class:`BagReader`, and header-stamp order per topic
-(:class:`StampChecker` refuses irregular stamps, :func:`stamp_irregularities` counts them).
+"""Reading bags with typed errors: :class:`BagReader` and the per-topic :class:`StampChecker`.
 
 Every failure becomes a :class:`~sepfm_ros.ros.bags.errors.BagError` subclass with a message
 meant for people: missing bag, truncated or corrupt storage, missing topic, unknown message type,
@@ -234,48 +233,6 @@ class BagReader:
                 f"cannot decode a {msg.msgtype} message on {msg.topic} at {msg.log_time_ns} ns: "
                 f"{err}"
             ) from None
-
-
-#: A forward step of a topic's header stamps longer than this many times its median is a gap.
-GAP_FACTOR = 3.0
-
-
-@dataclass
-class StampReport:
-    """Header-stamp irregularities of one topic: counts of repeats, steps back and gaps."""
-
-    messages: int = 0
-    repeated: int = 0
-    backwards: int = 0
-    jumps_back: int = 0  # of the steps back, those longer than the jump threshold
-    gaps: int = 0
-    largest_gap_s: float = 0.0
-
-    @property
-    def irregular(self) -> bool:
-        return bool(self.repeated or self.backwards or self.gaps)
-
-
-def stamp_irregularities(
-    stamps: Sequence[int], gap_factor: float = GAP_FACTOR, jump_back_ns: int = 1_000_000_000
-) -> StampReport:
-    """Count repeated, backwards and gap intervals in a topic's header stamps (ns, bag order).
-
-    A gap is a forward step longer than ``gap_factor`` times the median forward step; a jump
-    back is a step back longer than ``jump_back_ns`` (a looped bag, a restarted driver).
-    """
-    report = StampReport(messages=len(stamps))
-    steps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
-    report.repeated = sum(1 for d in steps if d == 0)
-    report.backwards = sum(1 for d in steps if d < 0)
-    report.jumps_back = sum(1 for d in steps if d < -jump_back_ns)
-    forward = sorted(d for d in steps if d > 0)
-    if forward:
-        median = forward[len(forward) // 2]
-        big = [d for d in forward if d > gap_factor * median]
-        report.gaps = len(big)
-        report.largest_gap_s = max(big, default=0) / 1e9
-    return report
 
 
 class StampChecker:

@@ -3,8 +3,9 @@ for fixed synthetic problems and seeds.
 
 The values were recorded from the estimator and guard refactorings of its internals (options
 object, RANSAC loop steps, shared kernels): any change to the sequence of random draws or to the
-arithmetic shows up here as a mismatch. A deliberate algorithmic change re-records them with the
-generator in this file's ``__main__`` block.
+arithmetic shows up here as a mismatch (F to 1e-9, relative: rounding differs between CPUs). A
+deliberate algorithmic change re-records them with the generator in this file's ``__main__``
+block.
 """
 
 from __future__ import annotations
@@ -208,7 +209,10 @@ def test_estimate_is_pinned(case):
     method, seed, n_lines, options, F, inliers, hyp, hyp1, fallback, status = case
     est = _estimate(method, seed, n_lines, options)
     assert est.status == status
-    assert np.array_equal(est.F, np.array(F)), f"F changed: {est.F.tolist()}"
+    # to rounding: the compiled sums may vectorise (FAST_MATH), and the vector width, so the
+    # order of the additions, differs between CPUs; any change of draws or algorithm moves F by
+    # far more (and moves the counts)
+    assert np.allclose(est.F, np.array(F), rtol=1e-9, atol=1e-12), f"F changed: {est.F.tolist()}"
     assert est.num_inliers == inliers
     assert est.hypotheses == hyp
     assert est.stage1_hypotheses == hyp1

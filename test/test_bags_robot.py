@@ -27,7 +27,12 @@ from std_msgs.msg import Header
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.bags import load_bag_pairs
 from sepfm_ros.geometry import fundamental_from_cameras
-from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, TopicNotFoundError
+from sepfm_ros.ros.bags.errors import (
+    BagCorruptError,
+    BagError,
+    BagNotFoundError,
+    TopicNotFoundError,
+)
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import IMAGE, header_stamp_ns
@@ -134,12 +139,15 @@ def test_process_picks_robot_topics_and_gives_the_bundled_F(
 
 def test_right_lag_needs_more_than_the_nodes_default_slop(kitti_frames, tmp_path):
     # the node's 5 ms sync_slop_s pairs none of the lagging frames: process's default pairing
-    # (nearest right within half a frame period) is what makes the test above pass
+    # (nearest right within half a frame period) is what makes the test above pass; a slop that
+    # pairs nothing is an error that says so, before any output exists
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", kitti_frames, right_lag_ns=LAG_NS)
-    done, total = run_process(
-        bag, tmp_path / "out", parse_params(["sync_slop_s:=0.005"]), progress=False, slop_given=True
-    )
-    assert (done, total) == (0, N_PAIRS)
+    with pytest.raises(BagError, match="no stereo pairs: .* within 5.0 ms .* sync_slop_s"):
+        run_process(
+            bag, tmp_path / "out", parse_params(["sync_slop_s:=0.005"]), progress=False,
+            slop_given=True,
+        )  # fmt: skip
+    assert not (tmp_path / "out").exists()
 
 
 def test_process_cli_topic_flags_on_a_ros1_bag(kitti_frames, reference_F, tmp_path):

@@ -80,6 +80,9 @@ def test_repeated_and_reordered_frames_are_skipped_as_the_node_skips_them(tmp_pa
     results = read_results(tmp_path / "out")
     assert [r.stamp_ns for r in results] == accepted[1:]
     assert all(r.run == 0 and r.F is not None for r in results)
+    # the expected count is the pairing's, not the message count's: nothing reads as lost
+    n = len(accepted) - 1
+    assert f"{n}/{n} frame pairs with F" in res.stdout and f"{n} of {n} pairs" in res.stdout
 
 
 def test_looped_stereo_bag_every_pass_processed_and_read_back_apart(tmp_path):

@@ -33,7 +33,7 @@ import argparse
 import bisect
 import sys
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -119,9 +119,18 @@ class PairJob:
 
 @dataclass
 class InputStamps:
-    """The input topics' header stamps (ns, bag order)."""
+    """The input topics' header stamps: (topic, stamp ns) in bag order."""
 
-    stamps: dict[str, list[int]]
+    topics: tuple[str, ...]
+    sequence: list[tuple[str, int]]
+
+    @property
+    def stamps(self) -> dict[str, list[int]]:
+        """Each topic's stamps (ns), in bag order."""
+        out: dict[str, list[int]] = {t: [] for t in self.topics}
+        for topic, stamp in self.sequence:
+            out[topic].append(stamp)
+        return out
 
     def warnings(self, jump_back_s: float) -> list[str]:
         """One line per topic whose stamps repeat, step back or jump back, saying what the
@@ -137,6 +146,48 @@ class InputStamps:
                 )
         return lines
 
+    def pair_count(self, spec: InputSpec, params: dict[str, Any], slop_ns: int | None) -> int:
+        """How many pairs :func:`iter_pairs` will form (the node's pairing run on the stamps)."""
+        events = ((topic, stamp, None, 0) for topic, stamp in self.sequence)
+        return sum(1 for _ in _paired(spec, params, slop_ns, events))
+
+
+@dataclass
+class _Paired:
+    """A pair formed by :func:`_paired`: its two frames, the pairing's restarts before it and
+    the log time (ns) of the input that completed it."""
+
+    a: Frame[Any]
+    b: Frame[Any]
+    run: int
+    log_time_ns: int
+
+
+def _paired(
+    spec: InputSpec,
+    params: dict[str, Any],
+    slop_ns: int | None,
+    events: Iterable[tuple[str, int, Any, int]],
+) -> Iterator[_Paired]:
+    """The node's pairing (:mod:`sepfm_ros.ros.pairing`) of input events (topic, stamp ns,
+    item, log time ns) in bag order."""
+    jump_s = float(params["stamp_jump_reset_s"])
+    if spec.mode == "stereo":
+        if slop_ns is None:
+            slop_ns = int(round(params["sync_slop_s"] * 1e9))
+        stereo: StereoPairing[Any] = StereoPairing(slop_ns, int(params["sync_queue_size"]), jump_s)
+        for topic, stamp, item, log_time in events:
+            side = LEFT if topic == spec.topics[0] else RIGHT
+            out = stereo.add(side, Frame(item, stamp))
+            if out.pair is not None:
+                yield _Paired(out.pair[0], out.pair[1], stereo.resets, log_time)
+    else:
+        motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
+        for _, stamp, item, log_time in events:
+            out = motion.add(Frame(item, stamp))
+            if out.pair is not None:
+                yield _Paired(out.pair[0], out.pair[1], motion.resets, log_time)
+
 
 def iter_pairs(
     reader: BagReader, spec: InputSpec, params: dict[str, Any], slop_ns: int | None = None
@@ -148,47 +199,25 @@ def iter_pairs(
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
     msg_class = CompressedImage if spec.transport == "compressed" else Image
-    jump_s = float(params["stamp_jump_reset_s"])
-    if spec.mode == "stereo":
-        if slop_ns is None:
-            slop_ns = int(round(params["sync_slop_s"] * 1e9))
-        stereo: StereoPairing[Any] = StereoPairing(slop_ns, int(params["sync_queue_size"]), jump_s)
+
+    def events() -> Iterator[tuple[str, int, Any, int]]:
         for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
-            side = LEFT if raw.topic == spec.topics[0] else RIGHT
-            out = stereo.add(side, Frame(msg, stamp_ns(msg.header.stamp)))
-            run = stereo.resets
-            if out.pair is None:
-                continue
-            left, right = out.pair[0].item, out.pair[1].item
-            yield PairJob(
-                left,
-                right,
-                copy_header(left.header),
-                (run, "l", out.pair[0].stamp_ns),
-                (run, "r", out.pair[1].stamp_ns),
-                raw.log_time_ns,
-                run,
-                stereo=True,
-            )
-    else:
-        motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
-        for raw in reader.messages(spec.topics):
-            msg = deserialize_message(raw.data, msg_class)
-            out = motion.add(Frame(msg, stamp_ns(msg.header.stamp)))
-            run = motion.resets
-            if out.pair is None:
-                continue
-            first, current = out.pair
-            yield PairJob(
-                first.item,
-                msg,
-                copy_header(msg.header),
-                (run, first.stamp_ns),
-                (run, current.stamp_ns),
-                raw.log_time_ns,
-                run,
-            )
+            yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
+
+    stereo = spec.mode == "stereo"
+    for p in _paired(spec, params, slop_ns, events()):
+        tags = ("l", "r") if stereo else ()
+        yield PairJob(
+            p.a.item,
+            p.b.item,
+            copy_header((p.a if stereo else p.b).item.header),  # left / current frame's
+            (p.run, *tags[:1], p.a.stamp_ns),
+            (p.run, *tags[1:], p.b.stamp_ns),
+            p.log_time_ns,
+            p.run,
+            stereo=stereo,
+        )
 
 
 def validate_inputs(reader: BagReader, spec: InputSpec) -> InputStamps:
@@ -197,10 +226,8 @@ def validate_inputs(reader: BagReader, spec: InputSpec) -> InputStamps:
     Raises BagCorruptError (unreadable data). Irregular stamps are not refused: the pairing
     skips or restarts on them as the node does (:meth:`InputStamps.warnings`).
     """
-    stamps: dict[str, list[int]] = {t: [] for t in spec.topics}
-    for raw in reader.messages(spec.topics):
-        stamps[raw.topic].append(header_stamp_ns(raw.data))
-    return InputStamps(stamps)
+    sequence = [(raw.topic, header_stamp_ns(raw.data)) for raw in reader.messages(spec.topics)]
+    return InputStamps(tuple(spec.topics), sequence)
 
 
 def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:
@@ -256,7 +283,8 @@ def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
 
 
 def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> int:
-    """How many pairs the bag should give (for the progress bar and success rates)."""
+    """How many pairs a regular bag gives, from the message counts alone (what a live node fed
+    the bag should answer); ``process`` counts its own with :meth:`InputStamps.pair_count`."""
     counts = [reader.topics[t].count for t in spec.topics]
     if spec.mode == "stereo":
         return min(counts)
@@ -344,7 +372,12 @@ def run_process(
                 file=sys.stderr,
                 flush=True,
             )
-        total = expected_pairs(reader, spec, params)
+        total = inputs.pair_count(spec, params, slop_ns)
+        if total == 0 and spec.mode == "stereo" and all(inputs.stamps.values()):
+            raise BagError(
+                f"no stereo pairs: no {spec.topics[0]} image has a {spec.topics[1]} image within "
+                f"{slop_ns / 1e6:.1f} ms of its stamp (set -p sync_slop_s:=SECONDS)"
+            )
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))

@@ -32,7 +32,13 @@ from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.ros.process import iter_pairs, pairing_slop_ns, parse_params, validate_inputs
-from sepfm_ros.ros.results import OUTPUT_NAMESPACE, output_topics, read_ground_truth, read_results
+from sepfm_ros.ros.results import (
+    OUTPUT_NAMESPACE,
+    output_topics,
+    read_ground_truth,
+    read_results,
+    run_label,
+)
 
 
 def is_bag(path: Path) -> bool:
@@ -72,8 +78,7 @@ def _input_bag_pairs(
     out.mkdir(parents=True, exist_ok=True)
     for job in iter_pairs(reader, spec, params, slop_ns):
         stamp = stamp_ns(job.header.stamp)
-        # a pass after a jump back of the stamps (a looped bag) gets its own ids
-        run = f"#{job.run + 1}" if job.run else ""
+        run = run_label(job.run)  # a looped bag's later passes get ids of their own
         pid = f"{bag.name}@{format_stamp(stamp)}{run}"
         try:
             if stamp not in gt:
@@ -96,7 +101,7 @@ def _input_bag_pairs(
 def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
     pairs, errors = [], []
     for fr in read_results(bag):
-        pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}" + (f"#{fr.run + 1}" if fr.run else "")
+        pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}{fr.run_label}"
         pts_a, pts_b = fr.pts()
         size_a, size_b = _size(fr.info.get("size_a", "")), _size(fr.info.get("size_b", ""))
         try:

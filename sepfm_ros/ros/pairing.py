@@ -39,25 +39,6 @@ class PairOutcome(Generic[T]):
     late: bool = False
 
 
-def stamp_order_effects(stamps: list[int], jump_back_s: float = 1.0) -> tuple[int, int]:
-    """What the pairing does with one topic's header stamps (ns, arrival order): (frames
-    skipped because their stamp is not after the topic's newest, restarts on a jump back of
-    more than ``jump_back_s``), as :class:`MotionPairing` and each side of
-    :class:`StereoPairing` judge them."""
-    jump_ns = int(round(jump_back_s * NS_PER_S))
-    skipped = restarts = 0
-    newest: int | None = None
-    for stamp in stamps:
-        if newest is not None and stamp < newest - jump_ns:
-            restarts += 1
-            newest = stamp
-        elif newest is not None and stamp <= newest:
-            skipped += 1
-        else:
-            newest = stamp
-    return skipped, restarts
-
-
 class StereoPairing(Generic[T]):
     """Left/right frames paired by stamp (:class:`ApproximateTimeSync`), reset on a jump back.
 
@@ -172,3 +153,13 @@ class MotionPairing(Generic[T]):
         if len(self._history) == self._history.maxlen:
             out.pair = (self._history[0], frame)
         return out
+
+
+def stamp_order_effects(stamps: list[int], jump_back_s: float = 1.0) -> tuple[int, int]:
+    """What the pairing does with one topic's header stamps (ns, arrival order): (frames
+    skipped because their stamp is not after the topic's newest, restarts on a jump back of
+    more than ``jump_back_s``): :class:`MotionPairing` run on them, which judges each side of
+    :class:`StereoPairing` the same way."""
+    pairing: MotionPairing[None] = MotionPairing(1, jump_back_s)
+    late = sum(pairing.add(Frame(None, stamp)).late for stamp in stamps)
+    return late, pairing.resets

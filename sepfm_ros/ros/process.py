@@ -35,6 +35,7 @@ import sys
 import time
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -124,7 +125,7 @@ class InputStamps:
     topics: tuple[str, ...]
     sequence: list[tuple[str, int]]
 
-    @property
+    @cached_property
     def stamps(self) -> dict[str, list[int]]:
         """Each topic's stamps (ns), in bag order."""
         out: dict[str, list[int]] = {t: [] for t in self.topics}

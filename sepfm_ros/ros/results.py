@@ -64,6 +64,12 @@ def gt_error_px(F: np.ndarray, F_gt: np.ndarray, pts_a: np.ndarray, pts_b: np.nd
     return float(np.median(symmetric_epipolar_distance(F, pts_a[pos], pts_b[pos])))
 
 
+def run_label(run: int) -> str:
+    """How a pass after ``run`` restarts of the pairing is marked: "#2", "#3", ...; "" for the
+    first (a looped bag's later passes keep the stamps of the first)."""
+    return f"#{run + 1}" if run else ""
+
+
 @dataclass
 class FrameResult:
     """The node's outputs for one stamp (the newer image's stamp)."""
@@ -74,6 +80,11 @@ class FrameResult:
     cloud: np.ndarray | None = None  # structured MATCH_DTYPE array
     info: dict[str, str] = field(default_factory=dict)
     F_gt: np.ndarray | None = None
+
+    @property
+    def run_label(self) -> str:
+        """ "#2", "#3", ... for the passes after a restart of the pairing; "" for the first."""
+        return run_label(self.run)
 
     @property
     def matches(self) -> int:
@@ -170,7 +181,7 @@ def format_table(results: list[FrameResult]) -> str:
     rows = [head, "-" * len(head)]
     for r in results:
         rows.append(
-            f"{format_stamp(r.stamp_ns) + (f' #{r.run + 1}' if r.run else ''):>21} "
+            f"{f'{format_stamp(r.stamp_ns)} {r.run_label}'.rstrip():>21} "
             f"{r.matches:>7d} {r.inliers:>7d} "
             f"{r.hypotheses:>6d} {'yes' if r.F is not None else 'no':>3} "
             f"{_fmt_err(r.error_px):>7}  {r.status}"

@@ -1,17 +1,12 @@
 """Benchmark of the live node against the same pipeline without ROS.
 
     python benchmarks/bench_node.py [--seconds 10] [--rate 30] [--features orb]
-<<<<<<< HEAD
         [--max-features 1000] [--method sep5] [--scenes NAME ...]
-        [--publisher-qos default sensor_data]
+        [--publisher-qos default sensor_data] [--write-docs]
 
 The node runs at its default settings (no QoS override), fed by a publisher with the QoS a camera
 driver uses: ROS 2's default (reliable) or sensor-data (best effort), one node per QoS.
-=======
-        [--max-features 1000] [--method sep5] [--scenes NAME ...] [--write-docs]
-
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
->>>>>>> h-hygiene
 
 For each scene it prints (templeRing 640x480 in motion mode: the 47 views of the ring as one
 image stream, F between consecutive views, each frame detected once; KITTI stereo 1241x376:
@@ -99,6 +94,7 @@ DEFAULT_SCENES = (
 # sensor-data profile (best effort, keep-last 5); the node runs at its default settings and
 # adapts its subscription to what is offered
 PUBLISHER_QOS = ("default", "sensor_data")
+NODE_ENV: dict[str, str] | None = None  # the node subprocess's environment (main() sets it)
 STAGES = ("decode", "features", "match", "lines", "stage1", "stage2", "refine", "estimate")
 STAGES += ("queue", "publish", "total")
 
@@ -349,7 +345,9 @@ def bench_node(mode, images, args, publisher_qos: str) -> None:
     cmd += ["-p", f"method:={args.method}"]
     for item in args.param:
         cmd += ["-p", item]
-    proc = subprocess.Popen(cmd, cwd=REPO, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        cmd, cwd=REPO, env=NODE_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT
+    )
     feeder = Feeder(node_name, mode, publisher_qos)
     try:
         feeder.wait_connected()
@@ -457,6 +455,11 @@ def main(argv: list[str] | None = None) -> int:
         print(f"shared data not found at {DATA}", file=sys.stderr)
         return 2
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
+    # the node runs in the caller's environment (a user's default: no discovery range set, so
+    # rmw_fastrtps's own transports, see sepfm_ros/ros/dds.py); this process's feeder keeps
+    # discovery on this machine
+    global NODE_ENV
+    NODE_ENV = dict(os.environ)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     with bench_docs.captured_stdout() as out:
         run_scenes(args)

@@ -45,15 +45,23 @@ ANSWER_TIMEOUT = 30.0  # s; generous: the machine is shared and 2-core
 class NodeProcess:
     """``python -m sepfm_ros node --ros-args ...`` as a subprocess with its output in a file."""
 
-    def __init__(self, name: str, tmp: Path, *ros_args: str) -> None:
+    def __init__(
+        self, name: str, tmp: Path, *ros_args: str, env: dict[str, str | None] | None = None
+    ) -> None:
+        """``env``: variables to set in the node's environment (None: unset it)."""
         self.name = name
         self.log_path = tmp / f"{name}.log"
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
         cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={name}"]
         cmd += list(ros_args)
-        env = dict(os.environ, PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
+        environ = dict(os.environ, PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
+        for key, value in (env or {}).items():
+            if value is None:
+                environ.pop(key, None)
+            else:
+                environ[key] = value
         self.proc = subprocess.Popen(
-            cmd, cwd=REPO, env=env, stdout=self._log, stderr=subprocess.STDOUT
+            cmd, cwd=REPO, env=environ, stdout=self._log, stderr=subprocess.STDOUT
         )
 
     def output(self) -> str:
@@ -341,9 +349,10 @@ def image_msg(gray: np.ndarray, stamp: int, encoding: str = "mono8", pad: int = 
     )
 
 
-def start_node(name, tmp, ros, inputs, *args, input_qos: QoSProfile = RELIABLE):
-    """Start a node subprocess and a connected :class:`Client` for it."""
-    proc = NodeProcess(name, tmp, *args)
+def start_node(name, tmp, ros, inputs, *args, input_qos: QoSProfile = RELIABLE, env=None):
+    """Start a node subprocess (``env``: see :class:`NodeProcess`) and a connected
+    :class:`Client` for it."""
+    proc = NodeProcess(name, tmp, *args, env=env)
     client = Client(ros, name, inputs, input_qos)
     try:
         client.wait_connected()

@@ -22,6 +22,7 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
 from ros_helpers import image_msg, send_pair, start_node  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
+from sepfm_ros.ros import dds  # noqa: E402
 from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
 
 # ROS 2's default publisher QoS (reliable, keep-last 10), as a camera driver's publisher has it
@@ -184,6 +185,147 @@ def test_sensor_data_qos_camera_is_received_best_effort(ros, tmp_path, images, s
             img_a, img_b = TEMPLE[11 + k], TEMPLE[12 + k]  # views 13-18: consecutive pairs
             assert gt_error(shared_data, values, F, cloud, img_a, img_b) < 1.0
         assert answered >= 3, f"answered {answered} of 5 mono8 pairs over loopback"
+    finally:
+        proc.stop()
+
+
+# the node as a user starts it: no discovery range set (this suite keeps its own processes on
+# LOCALHOST, where rmw_fastrtps chooses the transports itself; see sepfm_ros/ros/dds.py)
+USER_DISCOVERY = {"ROS_AUTOMATIC_DISCOVERY_RANGE": None, "ROS_LOCALHOST_ONLY": None}
+
+
+def udp_input_expected() -> bool:
+    """Whether the kernel lets the node take its input over UDP (dds.MIN_UDP_SOCKET_BYTES)."""
+    return dds.read_rmem_max() >= dds.MIN_UDP_SOCKET_BYTES
+
+
+def lost_samples_report(client, topic_key: str) -> dict[str, str]:
+    return wait_health(client, lambda v, lv, m: int(v.get(topic_key, 0)) > 0, timeout=20.0)
+
+
+def test_best_effort_colour_camera_every_pair_answered(ros, tmp_path, images, shared_data):
+    """640x480 bgr8 (900 KiB a frame) at 4 Hz from a sensor-data QoS (best-effort) publisher:
+    over Fast DDS's shared memory every frame was lost (0 of 19 pairs answered)."""
+    proc, client = start_node(
+        "field_be_colour",
+        tmp_path,
+        ros,
+        {"image": ("/be_colour/image_raw", Image)},
+        "-p",
+        "mode:=motion",
+        "-r",
+        "image_raw:=/be_colour/image_raw",
+        "-p",
+        "diagnostics_period_s:=0.5",
+        input_qos=qos_profile_sensor_data,
+        env=USER_DISCOVERY,
+    )
+    try:
+        health = client.latest_health(after=0.0)
+        assert health["input_reliability_image"] == "best_effort"
+        transport = health["dds_input_transport"]
+        stamps = []
+        for k in paced(0.25):
+            if k == len(TEMPLE):
+                break
+            stamps.append(T0 + k * 250_000_000)
+            client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), stamps[-1]))
+        if not udp_input_expected():
+            # the kernel's limit keeps shared memory: the loss is reported with its fix
+            assert transport.startswith("shared memory"), transport
+            lost_samples_report(client, "lost_samples_/be_colour/image_raw")
+            assert dds.RMEM_SYSCTL in proc.output()
+            return
+        assert transport.startswith("UDP"), transport
+        answered = 0
+        for k in range(1, len(TEMPLE)):
+            try:
+                _, F, _ = client.wait_outputs(stamps[k], timeout=10.0)
+            except AssertionError:
+                continue
+            answered += F is not None
+        assert answered >= 18, f"answered {answered} of 19 best-effort bgr8 pairs"
+        health = client.latest_health(after=0.0)
+        assert int(health.get("lost_samples", 0)) <= 1, health
+    finally:
+        proc.stop()
+
+
+def test_best_effort_stereo_rig_every_pair_answered(ros, tmp_path, images, shared_data):
+    """Two best-effort 1241x376 mono8 cameras (456 KiB a frame, published together): over
+    shared memory the left frames were lost."""
+    proc, client = start_node(
+        "field_be_stereo",
+        tmp_path,
+        ros,
+        {"left": ("/be_rig/left/image_raw", Image), "right": ("/be_rig/right/image_raw", Image)},
+        "-p",
+        "mode:=stereo",
+        "-r",
+        "left/image_raw:=/be_rig/left/image_raw",
+        "-r",
+        "right/image_raw:=/be_rig/right/image_raw",
+        input_qos=qos_profile_sensor_data,
+        env=USER_DISCOVERY,
+    )
+    try:
+        health = client.latest_health(after=0.0)
+        assert health["input_reliability_left"] == "best_effort"
+        if not udp_input_expected():
+            pytest.fail(
+                f"net.core.rmem_max {dds.read_rmem_max()} is below "
+                f"{dds.MIN_UDP_SOCKET_BYTES}: the node keeps shared memory "
+                f"({health['dds_input_transport']}); the colour-camera test checks that case"
+            )
+        stamps = []
+        for k in paced(0.25):
+            if k == len(KITTI):
+                break
+            stamps.append(T0 + k * 250_000_000)
+            left, right = KITTI[k]
+            send_pair(
+                client, image_msg(images(left), stamps[-1]), image_msg(images(right), stamps[-1])
+            )
+        answered = 0
+        for stamp in stamps:
+            try:
+                _, F, _ = client.wait_outputs(stamp, timeout=10.0)
+            except AssertionError:
+                continue
+            answered += F is not None
+        assert answered >= 9, f"answered {answered} of 10 best-effort stereo pairs"
+    finally:
+        proc.stop()
+
+
+def test_localhost_range_best_effort_loss_is_counted_with_its_fix(ros, tmp_path, images):
+    """With ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST rmw_fastrtps keeps shared memory, which
+    cannot carry a best-effort 900 KiB frame: the node counts the loss and names the fix."""
+    proc, client = start_node(
+        "field_be_localhost",
+        tmp_path,
+        ros,
+        {"image": ("/be_local/image_raw", Image)},
+        "-p",
+        "mode:=motion",
+        "-r",
+        "image_raw:=/be_local/image_raw",
+        "-p",
+        "diagnostics_period_s:=0.5",
+        input_qos=qos_profile_sensor_data,
+        env={"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
+    )
+    try:
+        health = client.latest_health(after=0.0)
+        assert "localhost" in health["dds_input_transport"]
+        for k in paced(0.25):
+            if k == 4:
+                break
+            client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), T0 + k))
+        report = lost_samples_report(client, "lost_samples_/be_local/image_raw")
+        assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
+        assert int(report["received_image"]) == 0
+        assert "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET" in proc.output()
     finally:
         proc.stop()
 

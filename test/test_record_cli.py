@@ -9,11 +9,14 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import rclpy
 from rclpy.duration import Duration
+from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
+from sepfm_ros.ros import dds
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader
 
@@ -72,3 +75,52 @@ def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_do
         images = [bytes(bag.deserialize(m).data) for m in bag.messages(["/rec_test/image"])]
     assert texts == [f"message {i}" for i in range(10)]
     assert images == [bytes([i, i + 1]) for i in range(10)]
+
+
+def test_record_keeps_a_best_effort_colour_camera(tmp_path, ros_domain_id):
+    """A sensor-data QoS (best-effort) publisher of 640x480 bgr8 frames (900 KiB): over Fast
+    DDS's shared memory the recorder got none of them (see sepfm_ros/ros/dds.py); with the
+    kernel's limit too small for UDP it says why and what lifts it."""
+    out = tmp_path / "rec_colour"
+    env = dict(os.environ)
+    env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)  # as a user starts it
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "sepfm_ros", "record", "-o", str(out), "--flush-interval", "0.2",
+         "/rec_be/image_raw"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
+    )  # fmt: skip
+    context = rclpy.Context()
+    rclpy.init(context=context)
+    node = rclpy.create_node("record_be_test", context=context)
+    rng = np.random.default_rng(0)
+    frames = [rng.integers(0, 256, (480, 640, 3), dtype=np.uint8) for _ in range(3)]
+    sent = 12
+    try:
+        pub = node.create_publisher(Image, "/rec_be/image_raw", qos_profile_sensor_data)
+        deadline = time.monotonic() + 60
+        while pub.get_subscription_count() < 1:
+            assert proc.poll() is None, proc.communicate()
+            assert time.monotonic() < deadline, "the recorder never subscribed"
+            time.sleep(0.05)
+        time.sleep(1.0)  # best effort keeps nothing for a reader whose matching is not complete
+        for i in range(sent):
+            msg = Image(height=480, width=640, encoding="bgr8", step=3 * 640)
+            msg.header.frame_id = str(i)
+            msg.data = frames[i % 3].tobytes()
+            pub.publish(msg)
+            time.sleep(0.1)
+        time.sleep(1.0)
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=30)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    assert proc.returncode == 0, err
+    with BagReader(out) as bag:
+        got = [bag.deserialize(m) for m in bag.messages(["/rec_be/image_raw"])]
+    if dds.read_rmem_max() < dds.MIN_UDP_SOCKET_BYTES:
+        assert dds.RMEM_SYSCTL in err, err
+        return
+    assert len(got) >= sent - 1, f"recorded {len(got)} of {sent} best-effort bgr8 frames\n{err}"
+    for msg in got:
+        assert bytes(msg.data) == frames[int(msg.header.frame_id) % 3].tobytes()

@@ -14,9 +14,9 @@ two native effects grew the node by ~60 MB while the Python heap stayed flat:
   Images +6.7 MB, 3,000 CompressedImages +3.0 MB; +5.7 and +1.5 MB at 128 KiB).
 - rmw_fastrtps gives every subscription a history whose payload buffers are preallocated and
   grown to the largest sample seen, and never shrink; with a reliable keep-all input the pool
-  holds as many buffers as samples ever waited at once. :func:`use_node_dds_profiles` has Fast
-  DDS allocate a payload per sample and free it when the sample is taken (DYNAMIC history), and
-  changes nothing else (publication mode and publishers' history stay rmw_fastrtps's defaults).
+  holds as many buffers as samples ever waited at once. :func:`sepfm_ros.ros.dds.configure_dds`
+  has Fast DDS allocate a payload per sample and free it when the sample is taken (DYNAMIC
+  history); publication mode and publishers' history stay rmw_fastrtps's defaults.
 
 :func:`release_free_memory` (called with every diagnostics report) hands freed heap pages back.
 All of it is best effort: a no-op outside glibc, and user Fast DDS configuration wins.
@@ -26,25 +26,12 @@ from __future__ import annotations
 
 import ctypes
 import ctypes.util
-import os
-from pathlib import Path
 
 # glibc's mallopt parameters (malloc.h)
 M_TRIM_THRESHOLD = -1
 M_MMAP_THRESHOLD = -3
 MMAP_THRESHOLD_BYTES = 1024 * 1024  # blocks from here on get their own mapping (see above)
 TRIM_THRESHOLD_BYTES = 1024 * 1024  # free heap top beyond this is returned at once
-
-DDS_PROFILES = Path(__file__).resolve().parent.parent / "data" / "fastdds_node_profiles.xml"
-# Fast DDS reads these; when any is set (or the working directory holds Fast DDS's default XML),
-# the user configures the middleware and we leave it alone.
-_USER_DDS_CONFIG = (
-    "FASTRTPS_DEFAULT_PROFILES_FILE",
-    "FASTDDS_DEFAULT_PROFILES_FILE",
-    "RMW_FASTRTPS_USE_QOS_FROM_XML",
-    "RMW_FASTRTPS_PUBLICATION_MODE",
-)
-_DEFAULT_XML_NAMES = ("DEFAULT_FASTRTPS_PROFILES.xml", "DEFAULT_FASTDDS_PROFILES.xml")
 
 
 def _load_libc():
@@ -82,21 +69,3 @@ def release_free_memory() -> None:
     """Return freed heap memory to the system (glibc only; a no-op elsewhere)."""
     if _LIBC is not None:
         _LIBC[0](0)
-
-
-def use_node_dds_profiles(environ: dict[str, str] | None = None, cwd: Path | None = None) -> bool:
-    """Point Fast DDS at the node's profiles (DYNAMIC subscriber history) unless the user
-    configures Fast DDS or another middleware is selected. Must run before ``rclpy.init``.
-
-    Returns True when the profiles were set in ``environ`` (default: ``os.environ``).
-    """
-    env = os.environ if environ is None else environ
-    rmw = env.get("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp")
-    if not rmw.startswith("rmw_fastrtps") or any(env.get(k) for k in _USER_DDS_CONFIG):
-        return False
-    where = Path.cwd() if cwd is None else cwd
-    if any((where / name).is_file() for name in _DEFAULT_XML_NAMES) or not DDS_PROFILES.is_file():
-        return False
-    env["FASTRTPS_DEFAULT_PROFILES_FILE"] = str(DDS_PROFILES)
-    env["RMW_FASTRTPS_USE_QOS_FROM_XML"] = "1"
-    return True

@@ -49,6 +49,7 @@ from sepfm_ros.pipeline.pipeline import (
 )
 from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.camera_info import CameraInfoInputs
+from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
@@ -127,8 +128,13 @@ def guarded(callback: Callable[..., None]) -> Callable[..., None]:
 class SepfmNode(Node):
     """The ``sepfm`` node (see the module docstring)."""
 
-    def __init__(self, node_name: str = NODE_NAME, **kwargs: Any) -> None:
+    def __init__(
+        self, node_name: str = NODE_NAME, dds: DdsSetup | None = None, **kwargs: Any
+    ) -> None:
+        """``dds``: the process's Fast DDS setup (:func:`sepfm_ros.ros.dds.configure_dds`), for
+        the log, ``/diagnostics`` and the advice on lost samples (None: not configured)."""
         super().__init__(node_name, **kwargs)
+        self._dds = dds or DdsSetup(False, UNCONFIGURED)
         for name, spec in PARAMS.items():
             self.declare_parameter(name, spec.default, descriptor(name, spec))
         values = self._param_values()
@@ -276,12 +282,9 @@ class SepfmNode(Node):
         if count <= 0:
             return
         self._health.lost_samples(topic, count)
+        advice = self._dds.lost_sample_advice()
         self._log_throttled(
-            "lost_samples",
-            f"{count} samples of {topic} lost in transport: large images over a best-effort "
-            "subscription lose a whole frame per lost fragment; publish reliable (the node then "
-            "subscribes reliable) or set input_reliability:=reliable",
-            error=False,
+            "lost_samples", f"{count} samples of {topic} lost in transport: {advice}", error=False
         )
 
     @guarded
@@ -522,6 +525,7 @@ class SepfmNode(Node):
         values["input_publishers"] = min(s.publisher_count() for s in self._subs)
         for sub, name in zip(self._subs, self._health.topics, strict=True):
             values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
+        values["dds_input_transport"] = self._dds.describe()
         # subscribers matched by the result publishers (the fewest over F, matches, info) and by
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())

@@ -1,6 +1,6 @@
 """``sepfm_ros node``: the process around :class:`~sepfm_ros.ros.node.SepfmNode`.
 
-Process-wide settings first (malloc thresholds, the DDS profile, one thread per native pool),
+Process-wide settings first (malloc thresholds, the DDS settings, one thread per native pool),
 then the estimator's kernels (compiled once after an install, loaded from the cache afterwards),
 then the node on a single-threaded executor until SIGINT or SIGTERM.
 """
@@ -17,7 +17,8 @@ from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedE
 from threadpoolctl import threadpool_limits
 
 from sepfm_ros.pipeline.compiled import warm_up
-from sepfm_ros.ros.memory import configure_malloc, use_node_dds_profiles
+from sepfm_ros.ros.dds import configure_dds
+from sepfm_ros.ros.memory import configure_malloc
 from sepfm_ros.ros.node import SepfmNode
 from sepfm_ros.ros.parameters import parameters_help
 from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
@@ -103,7 +104,7 @@ def main(argv: list[str]) -> int:
     parser.parse_args(own)
     # before any image flows and before rclpy creates the DDS participant (see ros/memory.py)
     malloc_fixed = configure_malloc()
-    dds_profiles = use_node_dds_profiles()
+    dds = configure_dds()
     limit_thread_pools(1)
     # compile (fresh install) or load the estimator's kernels before the first frame arrives
     warm_s = warm_up_interruptibly()
@@ -114,14 +115,15 @@ def main(argv: list[str]) -> int:
     node = None
     try:
         try:
-            node = SepfmNode()
+            node = SepfmNode(dds=dds)
         except ValueError as err:
             print(f"sepfm_ros node: {err}", flush=True)
             return 2
         node.get_logger().info(f"estimator kernels ready in {warm_s:.1f} s")
         node.get_logger().info(
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
-            + ("DDS subscriptions with DYNAMIC history" if dds_profiles else "DDS config left")
+            + ("DDS subscriptions with DYNAMIC history" if dds.profiles else "DDS config left")
+            + f"; image input over {dds.describe()}"
         )
         executor = SingleThreadedExecutor()
         executor.add_node(node)

@@ -4,6 +4,8 @@ Each topic is subscribed as soon as a publisher of it is discovered, with its me
 QoS compatible with every publisher (reliable only when all offer reliable, transient local only
 when all do); the offered QoS is stored with the topic. Messages are written as received (raw
 CDR, log time = receipt time). Stops on Ctrl-C, SIGTERM or after ``--duration`` seconds.
+Samples the middleware reports lost are counted per topic and reported at the end, with the
+cause; large best-effort images arrive as in the node (``sepfm_ros.ros.dds``).
 
 The bag is flushed every ``--flush-interval`` seconds (default 1): even a killed recorder leaves
 a readable bag with everything up to the last flush; a clean stop keeps everything.
@@ -20,6 +22,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, QoSProfile, ReliabilityPolicy
 from rosbags.interfaces import (
@@ -33,6 +36,7 @@ from rosbags.interfaces import (
 
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
+from sepfm_ros.ros.dds import configure_dds
 from sepfm_ros.ros.replay import absolute_topic, message_class
 from sepfm_ros.ros.signals import raise_keyboard_interrupt
 
@@ -68,7 +72,7 @@ class Recorder:
     """Subscribes ``topics`` on ``node`` (once discovered) and writes them to ``writer``.
 
     Call :meth:`discover` periodically (a timer does it when ``node`` is spun); ``counts`` holds
-    messages received per topic.
+    messages received per topic, ``lost`` samples the middleware reported lost.
     """
 
     def __init__(self, node: Node, writer: BagWriter, topics: Sequence[str]) -> None:
@@ -77,6 +81,7 @@ class Recorder:
         self.topics = [absolute_topic(t) for t in topics]
         self.subscriptions: dict[str, Any] = {}
         self.counts: Counter[str] = Counter()
+        self.lost: Counter[str] = Counter()
         self._timer = node.create_timer(0.1, self.discover)
         self._flush_timer = None
         if writer.flush_interval_s:
@@ -110,14 +115,21 @@ class Recorder:
                 else DurabilityPolicy.VOLATILE
             )
             self.writer.add_topic(topic, msgtype, [_recorded_qos(q) for q in offered])
-            self.subscriptions[topic] = self.node.create_subscription(
-                cls, topic, lambda data, t=topic: self._on_message(t, data), qos, raw=True
+            events = SubscriptionEventCallbacks(
+                message_lost=lambda info, t=topic: self._on_lost(t, int(info.total_count_change))
             )
+            self.subscriptions[topic] = self.node.create_subscription(
+                cls, topic, lambda data, t=topic: self._on_message(t, data), qos, raw=True,
+                event_callbacks=events,
+            )  # fmt: skip
             self.node.get_logger().info(f"recording {topic} ({msgtype})")
 
     def _on_message(self, topic: str, data: bytes) -> None:
         self.writer.write(topic, time.time_ns(), data)
         self.counts[topic] += 1
+
+    def _on_lost(self, topic: str, count: int) -> None:
+        self.lost[topic] += max(0, count)
 
     def ready(self) -> bool:
         """True when every topic is subscribed and matched with at least one publisher."""
@@ -162,6 +174,7 @@ def main(argv: list[str]) -> int:
     except BagError as err:
         print(f"sepfm_ros record: error: {err}", file=sys.stderr)
         return 1
+    dds = configure_dds()  # before rclpy creates the DDS participant
     rclpy.init(args=["record", *argv])
     previous = signal.signal(signal.SIGTERM, raise_keyboard_interrupt)
     node = rclpy.create_node("sepfm_record")
@@ -186,6 +199,10 @@ def main(argv: list[str]) -> int:
     missing = [t for t in recorder.topics if t not in recorder.subscriptions]
     summary = ", ".join(f"{t}: {recorder.counts[t]}" for t in recorder.topics)
     print(f"wrote {args.output} ({summary})", file=sys.stderr)
+    lost = ", ".join(f"{t}: {recorder.lost[t]}" for t in recorder.topics if recorder.lost[t])
+    if lost:
+        advice = dds.lost_sample_advice("the recorder")
+        print(f"sepfm_ros record: samples lost in transport ({lost}): {advice}", file=sys.stderr)
     if missing:
         print(f"sepfm_ros record: never saw a publisher of {', '.join(missing)}", file=sys.stderr)
     return code

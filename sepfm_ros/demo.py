@@ -1,7 +1,8 @@
 """``sepfm_ros demo``: the main job on a bag the package ships, through the live node.
 
 Starts the ``sepfm`` node as a subprocess, replays a bundled bag (``bags/synthetic_stereo`` by
-default: a rendered scene with exact ground truth) into it over DDS at the recorded rate, records
+default: a rendered scene with exact ground truth) into it over DDS at the recorded rate (and
+reliable, whatever QoS the bag recorded: large best-effort frames are lost on this host), records
 the node's outputs into a bag, then prints a per-frame table (stamp, matches, inliers, hypotheses,
 error against ground truth) and writes the node's debug image of one frame as a PNG. All of it
 stays on this machine: a random ``ROS_DOMAIN_ID`` and localhost-only discovery unless set.
@@ -145,7 +146,9 @@ def replay_through_node(
         # the images and, where the bag has them, their camera_info (calibrated outputs)
         with BagReader(bag) as reader:
             infos = [t for t in spec.camera_info_topics() if t in reader.topics]
-        replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate)
+        # reliable whatever the bag recorded: a best-effort camera's recording would otherwise
+        # lose its large frames to the transport on this host (sepfm_ros/ros/dds.py)
+        replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate, reliable=True)
         deadline = time.monotonic() + startup_timeout_s
         while not recorder.ready():
             if node_proc.poll() is not None:

@@ -14,6 +14,14 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from rosbags.interfaces import (
+    Qos,
+    QosDurability,
+    QosHistory,
+    QosLiveliness,
+    QosReliability,
+    QosTime,
+)
 from rosbags.rosbag1 import Writer as Writer1
 from rosbags.rosbag2 import StoragePlugin
 from rosbags.rosbag2 import Writer as Writer2
@@ -51,14 +59,16 @@ def _header(ts, fmt: str, stamp_ns: int, frame_id: str, seq: int):
 
 
 def _image(ts, header, img: np.ndarray):
-    h, w = img.shape
+    """mono8 of an (H, W) array, bgr8 of an (H, W, 3) one."""
+    h, w = img.shape[:2]
+    colour = img.ndim == 3
     return ts.types[IMAGE_T](
         header=header,
         height=h,
         width=w,
-        encoding="mono8",
+        encoding="bgr8" if colour else "mono8",
         is_bigendian=0,
-        step=w,
+        step=3 * w if colour else w,
         data=np.ascontiguousarray(img, np.uint8).reshape(-1),
     )
 
@@ -181,6 +191,38 @@ def write_robot_bag(
             else:
                 data = ts.serialize_cdr(msg, msgtype)
             writer.write(conns[topic], t, bytes(data))
+    return path
+
+
+def write_camera_bag(
+    path: Path,
+    frames: Sequence[np.ndarray],
+    period_ns: int = 250_000_000,
+    topic: str = "/camera/image_raw",
+    best_effort: bool = True,
+) -> Path:
+    """One camera's frames (mono8 (H, W) or bgr8 (H, W, 3) arrays) as ``ros2 bag record`` stores
+    a driver's stream, rosbag2 sqlite3, with the QoS the driver offered: the sensor-data profile
+    (best effort, keep-last 5) or ROS 2's default (reliable, keep-last 10). Returns ``path``."""
+    ts = _typestore("sqlite3")
+    inf = QosTime(sec=2147483647, nsec=4294967295)
+    qos = Qos(
+        history=QosHistory.KEEP_LAST,
+        depth=5 if best_effort else 10,
+        reliability=QosReliability.BEST_EFFORT if best_effort else QosReliability.RELIABLE,
+        durability=QosDurability.VOLATILE,
+        deadline=inf,
+        lifespan=inf,
+        liveliness=QosLiveliness.AUTOMATIC,
+        liveliness_lease_duration=inf,
+        avoid_ros_namespace_conventions=False,
+    )
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.SQLITE3) as writer:
+        conn = writer.add_connection(topic, IMAGE_T, typestore=ts, offered_qos_profiles=[qos])
+        for k, img in enumerate(frames):
+            t = START_NS + k * period_ns
+            msg = _image(ts, _header(ts, "sqlite3", t, "camera_optical_frame", k), img)
+            writer.write(conn, t, bytes(ts.serialize_cdr(msg, IMAGE_T)))
     return path
 
 

@@ -78,3 +78,39 @@ def test_loop_repeats_until_interrupted(ros_domain_id, background):
     assert got[:24] == stamps + stamps
     assert "Traceback" not in err
     assert proc.returncode == 130 and "interrupted" in err, (proc.returncode, err)
+
+
+def test_best_effort_recording_warns_and_reliable_publishes_reliable(tmp_path, shared_data):
+    """A best-effort camera's recording is published best effort (with a warning about large
+    frames on this host); ``--reliable`` publishes it reliable, which a reliable subscriber
+    (incompatible with a best-effort publisher) then receives in full."""
+    import cv2
+    from robot_bags import write_camera_bag
+
+    frames = [
+        cv2.imread(str(shared_data / f"templeRing/templeR{k:04d}.png"), cv2.IMREAD_COLOR)
+        for k in range(1, 7)
+    ]
+    bag = write_camera_bag(tmp_path / "camera_be", frames, period_ns=100_000_000)
+    got = {}
+    for flags in ((), ("--reliable",)):
+        listener = StampListener({"/camera/image_raw": Image})  # reliable, depth 10
+        try:
+            proc = subprocess.Popen(
+                [sys.executable, "-m", "sepfm_ros", "replay", str(bag), "--quiet", *flags,
+                 "--wait-for", "/camera/image_raw", "--wait-timeout", "5"],
+                stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
+            )  # fmt: skip
+            _, err = proc.communicate(timeout=60)
+            time.sleep(0.5)
+        finally:
+            listener.close()
+        got[flags] = (proc.returncode, err, list(listener.stamps["/camera/image_raw"]))
+    code, err, stamps = got[()]
+    # the reliable subscriber never matches the best-effort publisher: --wait-for times out
+    assert code == 1 and stamps == [], err
+    assert "recorded best effort and is published best effort" in err
+    code, err, stamps = got[("--reliable",)]
+    assert code == 0, err
+    assert "published best effort" not in err
+    assert stamps == header_stamps(bag, "/camera/image_raw")

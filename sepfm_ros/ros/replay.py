@@ -3,7 +3,10 @@
 Like ``ros2 bag play`` (not available from PyPI): BAG is a rosbag2 bag (sqlite3 or mcap) or a
 ROS 1 ``.bag`` (converted to ROS 2 messages as it plays); messages are published as CDR bytes,
 unchanged, at their recorded log times scaled by ``-r/--rate``, with the QoS the recorder saw
-offered (reliability, durability, history depth). ``--topics`` selects topics,
+offered (reliability, durability, history depth; ``--reliable`` publishes every topic reliable:
+a best-effort recording of a camera published best effort again loses every frame over 512 KiB
+to a subscriber on this host that receives through Fast DDS's shared memory, see
+``sepfm_ros.ros.dds``, and a warning says so). ``--topics`` selects topics,
 ``--exclude-topics`` leaves some out, ``--remap FROM:=TO`` renames them (``--left L --right R`` /
 ``--image I`` are short for remapping recorded camera topics onto the node's ``/left/image_raw``,
 ``/right/image_raw`` / ``/image_raw``), ``--start-offset S`` skips the first S seconds,
@@ -44,7 +47,7 @@ from tqdm import tqdm
 from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeError
 from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader, StampChecker
-from sepfm_ros.ros.bags.types import has_header, header_stamp_ns
+from sepfm_ros.ros.bags.types import IMAGE, has_header, header_stamp_ns
 from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 
 GAP_FACTOR = 3.0
@@ -172,7 +175,9 @@ class Replayer:
         clock_hz: float = 100.0,
         strict: bool = False,
         exclude: Sequence[str] = (),
+        reliable: bool = False,
     ) -> None:
+        """``reliable``: publish every topic reliable, whatever QoS the bag recorded."""
         if not rate > 0:
             raise BagError(f"--rate must be > 0, got {rate}")
         if start_offset_s < 0:
@@ -205,11 +210,15 @@ class Replayer:
             self._check_stamps_strict()
         self.start_ns = self.reader.start_time_ns + int(round(start_offset_s * 1e9))
         self.publishers = {}
+        self.best_effort_images: list[str] = []  # image topics published best effort
         for t in self.topics:
             info = self.reader.topics[t]
-            self.publishers[t] = node.create_publisher(
-                classes[t], self.remap.get(t, t), qos_from_recorded(info.qos)
-            )
+            qos = qos_from_recorded(info.qos)
+            if reliable:
+                qos.reliability = ReliabilityPolicy.RELIABLE
+            elif qos.reliability == ReliabilityPolicy.BEST_EFFORT and info.msgtype == IMAGE:
+                self.best_effort_images.append(t)
+            self.publishers[t] = node.create_publisher(classes[t], self.remap.get(t, t), qos)
         # messages per pass from the metadata (unknown with a start offset: no pre-pass)
         self.total: int | None = (
             sum(self.reader.topics[t].count for t in self.topics) if start_offset_s == 0 else None
@@ -231,8 +240,16 @@ class Replayer:
             checker.check(msg.topic, header_stamp_ns(msg.data), i)
 
     def skip_warnings(self) -> list[str]:
-        """One line per skipped topic: its name and why it cannot be played here."""
-        return [f"warning: skipping {t}: {reason}" for t, reason in sorted(self.skipped.items())]
+        """One line per skipped topic (its name and why it cannot be played here) and one per
+        image topic published best effort (large frames may be lost on this host)."""
+        lines = [f"warning: skipping {t}: {reason}" for t, reason in sorted(self.skipped.items())]
+        lines += [
+            f"warning: {t} was recorded best effort and is published best effort: a subscriber "
+            "on this host that receives through Fast DDS's shared memory loses every frame over "
+            "512 KiB (--reliable publishes it reliable)"
+            for t in self.best_effort_images
+        ]
+        return lines
 
     def stamp_warnings(self) -> list[str]:
         """One line per topic with irregular header stamps in the first pass played (after
@@ -405,6 +422,11 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument(
         "--image", metavar="TOPIC", help="publish this recorded image topic as the node's image_raw"
     )
+    p.add_argument(
+        "--reliable",
+        action="store_true",
+        help="publish every topic reliable, whatever QoS the bag recorded",
+    )
     p.add_argument("--clock", action="store_true", help="publish /clock with the bag's time")
     p.add_argument("--clock-hz", type=float, default=100.0, help="/clock rate (default 100)")
     p.add_argument(
@@ -459,6 +481,7 @@ def main(argv: list[str]) -> int:
             args.clock_hz,
             strict=args.strict,
             exclude=args.exclude_topics,
+            reliable=args.reliable,
         )
         for line in replayer.skip_warnings():
             print(f"sepfm_ros replay: {line}", file=sys.stderr, flush=True)

@@ -3,10 +3,10 @@
 Like ``ros2 bag play`` (not available from PyPI): BAG is a rosbag2 bag (sqlite3 or mcap) or a
 ROS 1 ``.bag`` (converted to ROS 2 messages as it plays); messages are published as CDR bytes,
 unchanged, at their recorded log times scaled by ``-r/--rate``, with the QoS the recorder saw
-offered (reliability, durability, history depth; ``--reliable`` publishes every topic reliable:
-a best-effort recording of a camera published best effort again loses every frame over 512 KiB
-to a subscriber on this host that receives through Fast DDS's shared memory, see
-``sepfm_ros.ros.dds``, and a warning says so). ``--topics`` selects topics,
+offered (reliability, durability, history depth), or reliable with ``--reliable`` (a
+best-effort camera's recording played best effort loses every frame over 512 KiB to a subscriber
+on this host that receives through Fast DDS's shared memory, see ``sepfm_ros.ros.dds``; a
+warning says so). ``--topics`` selects topics,
 ``--exclude-topics`` leaves some out, ``--remap FROM:=TO`` renames them (``--left L --right R`` /
 ``--image I`` are short for remapping recorded camera topics onto the node's ``/left/image_raw``,
 ``/right/image_raw`` / ``/image_raw``), ``--start-offset S`` skips the first S seconds,
@@ -239,7 +239,7 @@ class Replayer:
         for i, msg in enumerate(self.reader.messages(self._stamped)):
             checker.check(msg.topic, header_stamp_ns(msg.data), i)
 
-    def skip_warnings(self) -> list[str]:
+    def start_warnings(self) -> list[str]:
         """One line per skipped topic (its name and why it cannot be played here) and one per
         image topic published best effort (large frames may be lost on this host)."""
         lines = [f"warning: skipping {t}: {reason}" for t, reason in sorted(self.skipped.items())]
@@ -483,7 +483,7 @@ def main(argv: list[str]) -> int:
             exclude=args.exclude_topics,
             reliable=args.reliable,
         )
-        for line in replayer.skip_warnings():
+        for line in replayer.start_warnings():
             print(f"sepfm_ros replay: {line}", file=sys.stderr, flush=True)
         if args.wait_for:
             replayer.wait_for_subscribers(args.wait_for, args.wait_timeout)

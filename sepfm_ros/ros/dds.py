@@ -109,10 +109,13 @@ class DdsSetup:
                 "which then receives over UDP"
             )
         if self.transport == LOCALHOST:
+            also = f" and raise the kernel's UDP buffer limit ({RMEM_SYSCTL})"
             return (
                 f"with the localhost discovery range rmw_fastrtps sends {big} through shared "
                 f"memory, where they are lost whole: {reliable}, or run {who} with "
-                "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET (it then receives over UDP)"
+                "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET"
+                + (also if self.rmem_max < MIN_UDP_SOCKET_BYTES else "")
+                + " (it then receives over UDP)"
             )
         return (
             "large images over a best-effort subscription lose a frame per lost fragment: "

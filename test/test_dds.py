@@ -62,13 +62,14 @@ def test_small_kernel_limit_keeps_shared_memory_and_names_the_sysctl(tmp_path):
     "env", [{"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}, {"ROS_LOCALHOST_ONLY": "1"}]
 )
 def test_localhost_discovery_range_keeps_rmw_transports_and_says_so(env, tmp_path):
+    given = dict(env)
     setup = dds.configure_dds(env, cwd=tmp_path, rmem_max=64 * MIB)
     assert setup.transport == dds.LOCALHOST and setup.profiles
     assert "FASTDDS_BUILTIN_TRANSPORTS" not in env
     assert "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET" in setup.lost_sample_advice()
     assert dds.RMEM_SYSCTL not in setup.lost_sample_advice()  # the kernel allows UDP
     assert "run the recorder with" in setup.lost_sample_advice("the recorder")
-    small = dds.configure_dds(dict(env), cwd=tmp_path, rmem_max=212992)
+    small = dds.configure_dds(given, cwd=tmp_path, rmem_max=212992)
     assert small.transport == dds.LOCALHOST and dds.RMEM_SYSCTL in small.lost_sample_advice()
 
 

@@ -94,7 +94,6 @@ DEFAULT_SCENES = (
 # sensor-data profile (best effort, keep-last 5); the node runs at its default settings and
 # adapts its subscription to what is offered
 PUBLISHER_QOS = ("default", "sensor_data")
-NODE_ENV: dict[str, str] | None = None  # the node subprocess's environment (main() sets it)
 STAGES = ("decode", "features", "match", "lines", "stage1", "stage2", "refine", "estimate")
 STAGES += ("queue", "publish", "total")
 
@@ -346,7 +345,7 @@ def bench_node(mode, images, args, publisher_qos: str) -> None:
     for item in args.param:
         cmd += ["-p", item]
     proc = subprocess.Popen(
-        cmd, cwd=REPO, env=NODE_ENV, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT
+        cmd, cwd=REPO, env=args.node_env, stdout=subprocess.DEVNULL, stderr=subprocess.STDOUT
     )
     feeder = Feeder(node_name, mode, publisher_qos)
     try:
@@ -455,11 +454,10 @@ def main(argv: list[str] | None = None) -> int:
         print(f"shared data not found at {DATA}", file=sys.stderr)
         return 2
     os.environ.setdefault("ROS_DOMAIN_ID", str(random.SystemRandom().randint(1, 200)))
-    # the node runs in the caller's environment (a user's default: no discovery range set, so
-    # rmw_fastrtps's own transports, see sepfm_ros/ros/dds.py); this process's feeder keeps
+    # the node runs in the caller's environment (a user's default: no discovery range set, where
+    # the node picks its input transport, see sepfm_ros/ros/dds.py); this process's feeder keeps
     # discovery on this machine
-    global NODE_ENV
-    NODE_ENV = dict(os.environ)
+    args.node_env = dict(os.environ)
     os.environ.setdefault("ROS_AUTOMATIC_DISCOVERY_RANGE", "LOCALHOST")
     with bench_docs.captured_stdout() as out:
         run_scenes(args)

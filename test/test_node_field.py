@@ -199,8 +199,31 @@ def udp_input_expected() -> bool:
     return dds.read_rmem_max() >= dds.MIN_UDP_SOCKET_BYTES
 
 
-def lost_samples_report(client, topic_key: str) -> dict[str, str]:
-    return wait_health(client, lambda v, lv, m: int(v.get(topic_key, 0)) > 0, timeout=20.0)
+def input_over_udp(health: dict[str, str]) -> bool:
+    """Whether the node takes its input over UDP, checked against what the kernel allows."""
+    udp = udp_input_expected()
+    transport = health["dds_input_transport"]
+    assert transport.startswith("UDP" if udp else "shared memory"), transport
+    return udp
+
+
+def assert_loss_reported_with_sysctl(client, proc, key: str) -> None:
+    """The shared-memory branch: lost samples counted (``key`` in /diagnostics) and the log
+    naming the sysctl that lets the node take its input over UDP."""
+    wait_health(client, lambda v, lv, m: int(v.get(key, 0)) > 0, timeout=20.0)
+    assert dds.RMEM_SYSCTL in proc.output()
+
+
+def answered_with_f(client, stamps: list[int], timeout: float = 10.0) -> int:
+    """How many of the output ``stamps`` the node answered with an F."""
+    answered = 0
+    for stamp in stamps:
+        try:
+            _, F, _ = client.wait_outputs(stamp, timeout=timeout)
+        except AssertionError:
+            continue
+        answered += F is not None
+    return answered
 
 
 def test_best_effort_colour_camera_every_pair_answered(ros, tmp_path, images, shared_data):
@@ -223,27 +246,17 @@ def test_best_effort_colour_camera_every_pair_answered(ros, tmp_path, images, sh
     try:
         health = client.latest_health(after=0.0)
         assert health["input_reliability_image"] == "best_effort"
-        transport = health["dds_input_transport"]
+        udp = input_over_udp(health)
         stamps = []
         for k in paced(0.25):
             if k == len(TEMPLE):
                 break
             stamps.append(T0 + k * 250_000_000)
             client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), stamps[-1]))
-        if not udp_input_expected():
-            # the kernel's limit keeps shared memory: the loss is reported with its fix
-            assert transport.startswith("shared memory"), transport
-            lost_samples_report(client, "lost_samples_/be_colour/image_raw")
-            assert dds.RMEM_SYSCTL in proc.output()
+        if not udp:  # the kernel's limit keeps shared memory: the loss is reported with its fix
+            assert_loss_reported_with_sysctl(client, proc, "lost_samples_/be_colour/image_raw")
             return
-        assert transport.startswith("UDP"), transport
-        answered = 0
-        for k in range(1, len(TEMPLE)):
-            try:
-                _, F, _ = client.wait_outputs(stamps[k], timeout=10.0)
-            except AssertionError:
-                continue
-            answered += F is not None
+        answered = answered_with_f(client, stamps[1:])
         assert answered >= 18, f"answered {answered} of 19 best-effort bgr8 pairs"
         health = client.latest_health(after=0.0)
         assert int(health.get("lost_samples", 0)) <= 1, health
@@ -271,8 +284,7 @@ def test_best_effort_stereo_rig_every_pair_answered(ros, tmp_path, images, share
     try:
         health = client.latest_health(after=0.0)
         assert health["input_reliability_left"] == "best_effort"
-        udp = udp_input_expected()
-        assert health["dds_input_transport"].startswith("UDP" if udp else "shared memory")
+        udp = input_over_udp(health)
         stamps = []
         for k in paced(0.25):
             if k == len(KITTI):
@@ -282,18 +294,10 @@ def test_best_effort_stereo_rig_every_pair_answered(ros, tmp_path, images, share
             send_pair(
                 client, image_msg(images(left), stamps[-1]), image_msg(images(right), stamps[-1])
             )
-        if not udp:
-            # the kernel's limit keeps shared memory: the loss is reported with its fix
-            lost_samples_report(client, "lost_samples")
-            assert dds.RMEM_SYSCTL in proc.output()
+        if not udp:  # the kernel's limit keeps shared memory: the loss is reported with its fix
+            assert_loss_reported_with_sysctl(client, proc, "lost_samples")
             return
-        answered = 0
-        for stamp in stamps:
-            try:
-                _, F, _ = client.wait_outputs(stamp, timeout=10.0)
-            except AssertionError:
-                continue
-            answered += F is not None
+        answered = answered_with_f(client, stamps)
         assert answered >= 9, f"answered {answered} of 10 best-effort stereo pairs"
     finally:
         proc.stop()
@@ -323,7 +327,9 @@ def test_localhost_range_best_effort_loss_is_counted_with_its_fix(ros, tmp_path,
             if k == 4:
                 break
             client.publish("image", bgr_msg(images(TEMPLE[k], cv2.IMREAD_COLOR), T0 + k))
-        report = lost_samples_report(client, "lost_samples_/be_local/image_raw")
+        report = wait_health(
+            client, lambda v, lv, m: int(v.get("lost_samples_/be_local/image_raw", 0)) > 0, 20.0
+        )
         assert report["_level"] == int.from_bytes(DiagnosticStatus.WARN, "little")
         assert int(report["received_image"]) < 4  # shared memory delivers one now and then
         assert "ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET" in proc.output()

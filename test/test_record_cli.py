@@ -30,6 +30,17 @@ def _recorded(bag: Path) -> int:
         return 0
 
 
+def _wait_subscribed(proc: subprocess.Popen, pubs, timeout: float = 60.0) -> float:
+    """Wait until the recorder subscribed to every publisher of ``pubs``; returns the deadline
+    (time.monotonic()) for what the test waits for next."""
+    deadline = time.monotonic() + timeout
+    while any(pub.get_subscription_count() < 1 for pub in pubs):
+        assert proc.poll() is None, proc.communicate()
+        assert time.monotonic() < deadline, "the recorder never subscribed"
+        time.sleep(0.05)
+    return deadline
+
+
 def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_domain_id):
     out = tmp_path / "rec"
     proc = subprocess.Popen(
@@ -44,11 +55,7 @@ def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_do
         pub_text = node.create_publisher(String, "/rec_test/text", 10)
         pub_image = node.create_publisher(Image, "/rec_test/image", 10)
         other = node.create_publisher(String, "/rec_test/not_recorded", 10)
-        deadline = time.monotonic() + 60
-        while pub_text.get_subscription_count() < 1 or pub_image.get_subscription_count() < 1:
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "the recorder never subscribed"
-            time.sleep(0.05)
+        deadline = _wait_subscribed(proc, [pub_text, pub_image])
         # reliable publishers that have matched the recorder's subscriptions keep the messages
         # until the recorder acknowledges them, however late its side of discovery completes
         for i in range(10):
@@ -97,11 +104,7 @@ def test_record_keeps_a_best_effort_colour_camera(tmp_path, ros_domain_id):
     sent = 12
     try:
         pub = node.create_publisher(Image, "/rec_be/image_raw", qos_profile_sensor_data)
-        deadline = time.monotonic() + 60
-        while pub.get_subscription_count() < 1:
-            assert proc.poll() is None, proc.communicate()
-            assert time.monotonic() < deadline, "the recorder never subscribed"
-            time.sleep(0.05)
+        _wait_subscribed(proc, [pub])
         time.sleep(1.0)  # best effort keeps nothing for a reader whose matching is not complete
         for i in range(sent):
             msg = Image(height=480, width=640, encoding="bgr8", step=3 * 640)

@@ -45,22 +45,33 @@ def _infos(shared_data) -> tuple[CameraInfo, CameraInfo]:
 
 
 def _write_kitti_bag(
-    shared_data, path, rotation_deg=(0.0, 0.0, 0.0), with_info=True, prefix="", lag_ns=0
+    shared_data,
+    path,
+    rotation_deg=(0.0, 0.0, 0.0),
+    with_info=True,
+    prefix="",
+    lag_ns=0,
+    right_frames=range(FRAMES),
 ) -> None:
     """KITTI's first FRAMES stereo frames at 10 Hz on ``{prefix}/left/image_raw`` and
-    ``.../right/...``, camera_info beside them; the right stamps ``lag_ns`` after the left."""
+    ``.../right/...``, camera_info beside them; the right stamps ``lag_ns`` after the left.
+    ``right_frames``: the frame slots k that have a right image (slots from FRAMES on hold
+    the last right image, without a left one)."""
     info_l, info_r = _infos(shared_data)
     K = np.reshape(info_r.k, (3, 3))
     H = K @ cv2.Rodrigues(np.radians(rotation_deg))[0] @ np.linalg.inv(K)
     msgs = []
-    for k in range(FRAMES):
+    for k in range(max(FRAMES, max(right_frames) + 1)):
         for side, info, frame in (
             ("left", info_l, "left_camera_optical_frame"),
             ("right", info_r, "right_camera_optical_frame"),
         ):
+            if k not in (right_frames if side == "right" else range(FRAMES)):
+                continue
             stamp = 1_000_000_000 + k * 100_000_000 + (lag_ns if side == "right" else 0)
             img = cv2.imread(
-                str(shared_data / f"kitti_seq2/{side}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE
+                str(shared_data / f"kitti_seq2/{side}/{min(k, FRAMES - 1):06d}.png"),
+                cv2.IMREAD_GRAYSCALE,
             )
             if side == "right":
                 img = cv2.warpPerspective(img, H, (img.shape[1], img.shape[0]))
@@ -142,6 +153,31 @@ def test_robot_topic_names_and_a_lagging_right_camera(shared_data, tmp_path):
     assert r.returncode == 2, r.stdout + r.stderr
     assert "no stereo pairs" in r.stderr and "--sync-slop" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
+
+
+def test_progress_counts_the_pairs_that_form(shared_data, tmp_path):
+    """A right frame lost (slot 5) and one without a left partner (slot FRAMES): both cameras
+    have FRAMES images but FRAMES - 1 pairs form; the progress counts those, not the messages,
+    and the last line reads [FRAMES - 1/FRAMES - 1] (it read [FRAMES - 1/FRAMES])."""
+    bag = tmp_path / "lost"
+    right = [k for k in range(FRAMES + 1) if k != 5]
+    _write_kitti_bag(shared_data, bag, right_frames=right)
+    with BagReader(bag) as reader:
+        counts = {t: i.count for t, i in reader.topics.items() if i.msgtype == IMAGE}
+    assert counts == {"/left/image_raw": FRAMES, "/right/image_raw": FRAMES}
+    out = tmp_path / "out"
+    r = _run(bag, out)
+    assert r.returncode == 0, r.stdout + r.stderr
+    n = FRAMES - 1
+    assert f"checking {n} stereo pairs" in r.stdout, r.stdout
+    assert f"[{n}/{n}]" in r.stdout and "decision: OK" in r.stdout, r.stdout
+    with (out / "calibration_check.csv").open() as f:
+        stamps = [int(row["stamp_ns"]) for row in csv.DictReader(f)]
+    assert stamps == [1_000_000_000 + k * 100_000_000 for k in range(FRAMES) if k != 5]
+    r = _run(bag, tmp_path / "out2", "--max-pairs", "4", "--min-pairs", "3")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "checking 4 stereo pairs" in r.stdout and "[4/4]" in r.stdout, r.stdout
+    assert "[5/" not in r.stdout
 
 
 def test_motion_bag_says_stereo_is_needed(tmp_path):

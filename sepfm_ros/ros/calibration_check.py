@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,11 +47,14 @@ from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibration_msgs import camera_model_from_info
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
-from sepfm_ros.ros.pairing import Frame, StereoPairing
 from sepfm_ros.ros.parameters import parameter_error
-from sepfm_ros.ros.process import pairing_slop_ns, parse_params, validate_inputs
+from sepfm_ros.ros.process import (
+    paired_frames,
+    pairing_slop_ns,
+    parse_params,
+    validate_inputs,
+)
 from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
-from sepfm_ros.ros.sync import LEFT, RIGHT
 
 
 @dataclass
@@ -174,13 +178,15 @@ def run_check(
             reader.require(topic, (CAMERA_INFO,))
         jump_s = params["stamp_jump_reset_s"]
         inputs = validate_inputs(reader, spec)
-        stamps = inputs.stamps
-        slop_ns = pairing_slop_ns(params, stamps[left], args.sync_slop is not None)
-        pairing: StereoPairing[Any] = StereoPairing(slop_ns, params["sync_queue_size"], jump_s)
-        total = min(len(stamps[left]), len(stamps[right]))
+        slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
+        total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
+        if total == 0:
+            raise BagError(
+                f"no stereo pairs: no {left} image has a {right} image within "
+                f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
+            )
         if args.max_pairs:
             total = min(total, args.max_pairs)
-        side_of = {left: LEFT, right: RIGHT}
         rig = _Rig(rectified)
         print(
             f"checking {total} stereo pairs of {args.bag} ({left} + {right}"
@@ -191,40 +197,39 @@ def run_check(
         )
         for line in inputs.warnings(jump_s):
             print(line, file=out)
-        ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
-        for raw in reader.messages([left, right, left_info, right_info]):
-            if stop is not None:
-                stop.check()
-            msg = reader.deserialize(raw)
-            if raw.topic == left_info:
-                rig.infos["left"] = msg
-            elif raw.topic == right_info:
-                rig.infos["right"] = msg
-            else:
-                pair = pairing.add(side_of[raw.topic], Frame(msg, stamp_ns(msg.header.stamp))).pair
-                if pair is not None:
-                    ready.append((pair[0].stamp_ns, pair[0].item, pair[1].item))
-            while (
-                ready
-                and len(rig.infos) == 2
-                and not (args.max_pairs and len(rows) >= args.max_pairs)
-            ):
+        sides = {left_info: "left", right_info: "right"}
+
+        def events() -> Iterator[tuple[str, int, Any, int]]:
+            """The image messages in bag order; camera_info messages update the rig."""
+            for raw in reader.messages([left, right, left_info, right_info]):
+                if stop is not None:
+                    stop.check()
+                msg = reader.deserialize(raw)
+                if raw.topic in sides:
+                    rig.infos[sides[raw.topic]] = msg
+                else:
+                    yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
+
+        def check_ready() -> None:
+            """Check the complete pairs once both camera_infos are known."""
+            while ready and len(rig.infos) == 2 and len(rows) < total:
                 stamp, msg_l, msg_r = ready.pop(0)
                 row = _check_one(rig, pipeline, monitor, stamp, msg_l, msg_r, len(rows), out)
                 if row is not None:
                     rows.append(row)
                     print(_row_line(row, total), file=out, flush=True)
-            if args.max_pairs and len(rows) >= args.max_pairs:
+
+        ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
+        for pair in paired_frames(spec, params, slop_ns, events()):
+            ready.append((pair.a.stamp_ns, pair.a.item, pair.b.item))
+            check_ready()
+            if len(rows) >= total:
                 break
-        if ready:
+        check_ready()  # a camera_info after the last pair
+        if ready and len(rows) < total:
             missing = [s for s in ("left", "right") if s not in rig.infos]
             topics = [left_info if s == "left" else right_info for s in missing]
             raise CalibrationError(f"no camera_info message on {', '.join(topics)} in the bag")
-        if not rows and not pairing.stats.pairs:
-            raise BagError(
-                f"no stereo pairs: no {left} image has a {right} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
-            )
     return rows
 
 

@@ -150,13 +150,13 @@ class InputStamps:
     def pair_count(self, spec: InputSpec, params: dict[str, Any], slop_ns: int | None) -> int:
         """How many pairs :func:`iter_pairs` will form (the node's pairing run on the stamps)."""
         events = ((topic, stamp, None, 0) for topic, stamp in self.sequence)
-        return sum(1 for _ in _paired(spec, params, slop_ns, events))
+        return sum(1 for _ in paired_frames(spec, params, slop_ns, events))
 
 
 @dataclass
-class _Paired:
-    """A pair formed by :func:`_paired`: its two frames, the pairing's restarts before it and
-    the log time (ns) of the input that completed it."""
+class Paired:
+    """A pair formed by :func:`paired_frames`: its two frames, the pairing's restarts before it
+    and the log time (ns) of the input that completed it."""
 
     a: Frame[Any]
     b: Frame[Any]
@@ -164,12 +164,12 @@ class _Paired:
     log_time_ns: int
 
 
-def _paired(
+def paired_frames(
     spec: InputSpec,
     params: dict[str, Any],
     slop_ns: int | None,
     events: Iterable[tuple[str, int, Any, int]],
-) -> Iterator[_Paired]:
+) -> Iterator[Paired]:
     """The node's pairing (:mod:`sepfm_ros.ros.pairing`) of input events (topic, stamp ns,
     item, log time ns) in bag order."""
     jump_s = float(params["stamp_jump_reset_s"])
@@ -181,13 +181,13 @@ def _paired(
             side = LEFT if topic == spec.topics[0] else RIGHT
             out = stereo.add(side, Frame(item, stamp))
             if out.pair is not None:
-                yield _Paired(out.pair[0], out.pair[1], stereo.resets, log_time)
+                yield Paired(out.pair[0], out.pair[1], stereo.resets, log_time)
     else:
         motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
         for _, stamp, item, log_time in events:
             out = motion.add(Frame(item, stamp))
             if out.pair is not None:
-                yield _Paired(out.pair[0], out.pair[1], motion.resets, log_time)
+                yield Paired(out.pair[0], out.pair[1], motion.resets, log_time)
 
 
 def iter_pairs(
@@ -207,7 +207,7 @@ def iter_pairs(
             yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
-    for p in _paired(spec, params, slop_ns, events()):
+    for p in paired_frames(spec, params, slop_ns, events()):
         tags = ("l", "r") if stereo else ()
         yield PairJob(
             p.a.item,

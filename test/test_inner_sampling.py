@@ -16,7 +16,7 @@ from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import msac_kernel
 from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.inner_sampling import inner_sampling
+from sepfm_ros.geometry.inner_sampling import MAX_INLIER_RATIO, inner_sampling
 from sepfm_ros.geometry.nonlinear import noise_truncation
 from sepfm_ros.geometry.refine import fit_least_squares
 from sepfm_ros.geometry.synthetic import make_pair
@@ -72,6 +72,24 @@ def test_from_a_rough_model_it_lands_near_the_gt_f():
         if np.median(data.distances(F)[true]) < 1.1 * gt:
             hits += 1
     assert hits == 5
+
+
+def test_a_model_with_most_matches_as_inliers_is_not_sampled():
+    """At MAX_INLIER_RATIO or more of the matches as inliers the search's own samples were
+    mostly all-inlier: the model is returned as it is, no inner sample drawn."""
+    pair = make_pair(n_inliers=400, n_outliers=100, n_lines=0, noise=0.4, seed=3)
+    data = Correspondences.from_pixels(pair.pts1, pair.pts2)
+    problem = FundamentalProblem(data, "seven", 1.0)
+    true = np.flatnonzero(pair.is_inlier)
+    corner = true[np.argsort(pair.pts1[true, 0])[:40]]
+    for start in (pair.F, fit_least_squares(pair.pts1[corner], pair.pts2[corner])):
+        ratio = np.mean(data.distances(start) < 1.0)
+        F, scored = inner_sampling(start, problem, np.random.default_rng(0), 20)
+        if ratio >= MAX_INLIER_RATIO:
+            assert F is start and scored == 0
+        else:  # the corner model: few inliers, sampled
+            assert scored >= 20
+    assert np.mean(data.distances(pair.F) < 1.0) >= MAX_INLIER_RATIO  # the first case ran
 
 
 def test_deterministic_for_a_seed():

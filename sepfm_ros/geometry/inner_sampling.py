@@ -12,6 +12,12 @@ cost. A refit replaces the model only if it lowers the MSAC cost at the threshol
 raising the MSAC cost at the model's noise truncation (``nonlinear.noise_truncation``): on noisy
 matches (ORB on video frames) a 1 px cost alone prefers a model that fits a tight subset of the
 matches and misses the rest.
+
+Only a model with under MAX_INLIER_RATIO of the matches as inliers is sampled: when most matches
+are inliers, most of the search's samples were all-inlier and its local optimisation started
+from many of them, so the inner samples found no better basin (measured on the node's KITTI
+and templeRing pairs, the shared pairs and the line-rich scenes: equal F-scores, 6-9 % less
+time where the ratio is high).
 """
 
 from __future__ import annotations
@@ -27,6 +33,8 @@ from sepfm_ros.geometry.refine import normalized_model, refit_kernel
 
 #: Matches per inner sample: twice the seven of a minimal sample.
 INNER_SAMPLE_SIZE = 14
+#: Inlier ratio (inliers / matches) of the final model from which it is not inner-sampled.
+MAX_INLIER_RATIO = 0.7
 
 
 def inner_sampling(
@@ -47,13 +55,14 @@ def inner_sampling(
         size: matches per inner sample (>= 8).
     Returns:
         (F' (3, 3), models scored): F' is F or the refit the rule above picks; F unchanged
-        when F has fewer than 2 x ``size`` inliers.
+        when F has fewer than 2 x ``size`` inliers or at least MAX_INLIER_RATIO of the
+        matches are its inliers.
     """
     if samples <= 0:
         return F, 0
     data, threshold = problem.data, problem.threshold
     inliers = np.flatnonzero(data.distances(F) < threshold)
-    if len(inliers) < 2 * size:
+    if len(inliers) < 2 * size or len(inliers) >= MAX_INLIER_RATIO * len(data):
         return F, 0
     drawn = draw_samples(rng, inliers, size, samples)
     best = _best_inner_fit(

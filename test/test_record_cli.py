@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import subprocess
 import sys
 import time
+from collections.abc import Iterator
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import rclpy
@@ -41,17 +45,43 @@ def _wait_subscribed(proc: subprocess.Popen, pubs, timeout: float = 60.0) -> flo
     return deadline
 
 
-def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_domain_id):
-    out = tmp_path / "rec"
+@dataclass
+class _Recording:
+    """A running ``sepfm_ros record`` and the test's own rclpy node; ``err``: the recorder's
+    stderr once it stopped."""
+
+    proc: subprocess.Popen
+    node: Any
+    err: str = ""
+
+
+@contextlib.contextmanager
+def _recording(
+    out: Path, topics: list[str], node_name: str, env: dict[str, str] | None = None
+) -> Iterator[_Recording]:
+    """Run ``sepfm_ros record -o out TOPICS`` (flushing every 0.2 s) beside a node of the test's
+    own context; on exit the recorder is stopped with SIGINT, as a user stops it."""
     proc = subprocess.Popen(
         [sys.executable, "-m", "sepfm_ros", "record", "-o", str(out), "--flush-interval", "0.2",
-         "/rec_test/text", "/rec_test/image"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=dict(os.environ),
+         *topics],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env or dict(os.environ),
     )  # fmt: skip
     context = rclpy.Context()
     rclpy.init(context=context)
-    node = rclpy.create_node("record_cli_test", context=context)
+    rec = _Recording(proc, rclpy.create_node(node_name, context=context))
     try:
+        yield rec
+    finally:
+        proc.send_signal(signal.SIGINT)
+        _, rec.err = proc.communicate(timeout=30)
+        rec.node.destroy_node()
+        rclpy.try_shutdown(context=context)
+
+
+def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_domain_id):
+    out = tmp_path / "rec"
+    with _recording(out, ["/rec_test/text", "/rec_test/image"], "record_cli_test") as rec:
+        proc, node = rec.proc, rec.node
         pub_text = node.create_publisher(String, "/rec_test/text", 10)
         pub_image = node.create_publisher(Image, "/rec_test/image", 10)
         other = node.create_publisher(String, "/rec_test/not_recorded", 10)
@@ -69,13 +99,8 @@ def test_record_writes_every_message_of_the_topics_it_was_given(tmp_path, ros_do
             assert proc.poll() is None, proc.communicate()
             assert time.monotonic() < deadline, f"only {_recorded(out)} of 20 messages recorded"
             time.sleep(0.05)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-    assert proc.returncode == 0, err
-    assert "Traceback" not in err
+    assert proc.returncode == 0, rec.err
+    assert "Traceback" not in rec.err
     with BagReader(out) as bag:
         assert set(bag.topics) == {"/rec_test/text", "/rec_test/image"}
         texts = [bag.deserialize(m).data for m in bag.messages(["/rec_test/text"])]
@@ -91,19 +116,12 @@ def test_record_keeps_a_best_effort_colour_camera(tmp_path, ros_domain_id):
     out = tmp_path / "rec_colour"
     env = dict(os.environ)
     env.pop("ROS_AUTOMATIC_DISCOVERY_RANGE", None)  # as a user starts it
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "sepfm_ros", "record", "-o", str(out), "--flush-interval", "0.2",
-         "/rec_be/image_raw"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-    )  # fmt: skip
-    context = rclpy.Context()
-    rclpy.init(context=context)
-    node = rclpy.create_node("record_be_test", context=context)
     rng = np.random.default_rng(0)
     frames = [rng.integers(0, 256, (480, 640, 3), dtype=np.uint8) for _ in range(3)]
     sent = 12
-    try:
-        pub = node.create_publisher(Image, "/rec_be/image_raw", qos_profile_sensor_data)
+    with _recording(out, ["/rec_be/image_raw"], "record_be_test", env) as rec:
+        proc = rec.proc
+        pub = rec.node.create_publisher(Image, "/rec_be/image_raw", qos_profile_sensor_data)
         _wait_subscribed(proc, [pub])
         time.sleep(1.0)  # best effort keeps nothing for a reader whose matching is not complete
         for i in range(sent):
@@ -113,11 +131,7 @@ def test_record_keeps_a_best_effort_colour_camera(tmp_path, ros_domain_id):
             pub.publish(msg)
             time.sleep(0.1)
         time.sleep(1.0)
-    finally:
-        proc.send_signal(signal.SIGINT)
-        _, err = proc.communicate(timeout=30)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+    err = rec.err
     assert proc.returncode == 0, err
     with BagReader(out) as bag:
         got = [bag.deserialize(m) for m in bag.messages(["/rec_be/image_raw"])]

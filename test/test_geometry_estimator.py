@@ -310,3 +310,17 @@ def test_automatic_sample_cap_bounds_the_scoring_work():
         assert est.samples == cap, (method, est.samples)
     est = estimate_fundamental(pts1, pts2, (640, 480), method="ransac7", seed=0, max_samples=500)
     assert est.samples == 500
+
+
+def test_status_code_set_with_status_text():
+    """The estimate carries its status as a code beside the text (no parsing of the text)."""
+    from sepfm_ros.geometry import StatusCode
+
+    rng = np.random.default_rng(0)
+    pts1 = rng.uniform(0, 640, (200, 2))
+    same = estimate_fundamental(pts1, pts1.copy(), (640, 480), seed=0)
+    assert same.code == StatusCode.DEGENERATE and same.status.startswith("degenerate")
+    assert not same.ok
+    random = estimate_fundamental(pts1, rng.uniform(0, 640, (200, 2)), (640, 480), seed=0)
+    assert random.code == StatusCode.NOT_SIGNIFICANT, random.status
+    assert random.status.startswith("not significant")

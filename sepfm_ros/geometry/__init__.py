@@ -19,7 +19,7 @@ from sepfm_ros.geometry.epipolar import (
     sampson_distance,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.estimate import Estimate
+from sepfm_ros.geometry.estimate import Estimate, StatusCode
 from sepfm_ros.geometry.estimator import (
     DEFAULT_METHOD,
     METHODS,
@@ -36,6 +36,7 @@ __all__ = [
     "estimate_fundamental",
     "fundamental_from_cameras",
     "normalize_fundamental",
+    "StatusCode",
     "ransac_trials",
     "sampson_distance",
     "symmetric_epipolar_distance",

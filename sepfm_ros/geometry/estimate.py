@@ -3,8 +3,32 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from enum import IntEnum
 
 import numpy as np
+
+
+class StatusCode(IntEnum):
+    """What an estimate's status says, as a code (``Estimate.code``); the text says why.
+
+    The values are those of the ``STATUS_*`` constants of ``sepfm_msgs/TwoViewEstimate``.
+    """
+
+    OK = 0
+    """F exists and is trusted."""
+    UNRELIABLE = 1
+    """F exists but its robust scale exceeds the threshold (LMedS methods)."""
+    DEGENERATE = 2
+    """No F, or F not determined by the data: a dominant plane, inliers along one line, no
+    motion, too few inliers, every sample degenerate."""
+    NOT_SIGNIFICANT = 3
+    """F exists but random matches would give its consensus as well (a contrario test)."""
+    TOO_FEW_MATCHES = 4
+    """Too few matches to estimate F."""
+    BAD_INPUT = 5
+    """The input could not be used (undecodable image, size change, rejected points)."""
+    INTERNAL_ERROR = 6
+    """An unexpected error while answering the pair."""
 
 
 @dataclass
@@ -37,6 +61,8 @@ class Estimate:
             spaced points, ``EstimatorOptions.periodic_check``) and whose arms joined stage 2
             after the others.
         status: "ok", or a short reason when F is None or unreliable (e.g. "degenerate: ...").
+        code: the status as a :class:`StatusCode` (set together with ``status``, see
+            :meth:`set_status`).
         method: the method name that produced this estimate.
         timings_ms: milliseconds per stage ("lines", "stage1", "stage2", "refine", "total").
         scale: the LMedS methods' robust scale sigma (px of symmetric epipolar distance) of F,
@@ -61,10 +87,16 @@ class Estimate:
     unfixed_lead: bool = False
     periodic_line_pairs: int = 0
     status: str = "ok"
+    code: StatusCode = StatusCode.OK
     method: str = ""
     timings_ms: dict[str, float] = field(default_factory=dict)
     scale: float | None = None
     log10_nfa: float | None = None
+
+    def set_status(self, code: StatusCode, text: str) -> None:
+        """Set the status code and its text together."""
+        self.code = StatusCode(code)
+        self.status = text
 
     @property
     def num_inliers(self) -> int:
@@ -73,4 +105,4 @@ class Estimate:
     @property
     def ok(self) -> bool:
         """True when F exists and the status is not a failure/degeneracy."""
-        return self.F is not None and self.status == "ok"
+        return self.F is not None and self.code == StatusCode.OK

@@ -59,7 +59,7 @@ from sepfm_ros.geometry.degeneracy import (
     transfer_error,
 )
 from sepfm_ros.geometry.epipolar import msac_kernel, normalize_fundamental
-from sepfm_ros.geometry.estimate import Estimate
+from sepfm_ros.geometry.estimate import Estimate, StatusCode
 from sepfm_ros.geometry.fundamental_problem import (
     LO_SCHEMES,
     FundamentalProblem,
@@ -556,7 +556,7 @@ def estimate_fundamental(
         else:
             _finish(problem, est, result.model)
     if reason is not None:
-        est.status = reason
+        est.set_status(StatusCode.DEGENERATE, reason)
     est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
     return est
 
@@ -873,7 +873,7 @@ def _final_status(
     d, threshold = problem.data, problem.threshold
     k = est.num_inliers
     if k < 8:
-        est.status = f"degenerate: only {k} inliers"
+        est.set_status(StatusCode.DEGENERATE, f"degenerate: only {k} inliers")
         return
     rng = problem.rng.spawn(1)[0]
     est.log10_nfa = consensus_log10_nfa(est.F, d, est.inliers, threshold, rng)
@@ -884,7 +884,14 @@ def _final_status(
             f"matches would give (log10 NFA {est.log10_nfa:+.1f})"
         )
     band = _line_band_status(d.pts1[est.inliers], d.pts2[est.inliers], threshold)
-    est.status = band or plane or unreliable or chance or est.status
+    for code, text in (
+        (StatusCode.DEGENERATE, band or plane),
+        (StatusCode.UNRELIABLE, unreliable),
+        (StatusCode.NOT_SIGNIFICANT, chance),
+    ):
+        if text:
+            est.set_status(code, text)
+            return
 
 
 def _final_model(

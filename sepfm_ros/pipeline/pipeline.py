@@ -41,6 +41,7 @@ from sepfm_ros.geometry import (
     DEFAULT_METHOD,
     METHODS,
     Estimate,
+    StatusCode,
     estimate_fundamental,
     symmetric_epipolar_distance,
 )
@@ -426,6 +427,7 @@ def _estimate(
             F=None,
             inliers=np.zeros(n, dtype=bool),
             status=f"too few matches: {n} < {MIN_MATCHES}",
+            code=StatusCode.TOO_FEW_MATCHES,
             method=cfg.method,
         )
     try:
@@ -445,5 +447,6 @@ def _estimate(
             F=None,
             inliers=np.zeros(n, dtype=bool),
             status=f"estimator rejected input: {err}",
+            code=StatusCode.BAD_INPUT,
             method=cfg.method,
         )

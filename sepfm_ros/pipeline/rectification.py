@@ -1,0 +1,279 @@
+"""Uncalibrated stereo rectification: F and its inlier matches -> two rectifying homographies.
+
+No ROS. The homographies are OpenCV's ``stereoRectifyUncalibrated`` (Hartley's method: H_b sends
+image b's epipole to infinity along x with the least distortion at the image centre, H_a is the
+homography compatible with F that minimises the horizontal disparity of the matches). This
+module adds what a live consumer needs around it:
+
+- checks with a clear :class:`RectificationError` (``kind`` one of ``ERROR_KINDS``) instead of
+  wild homographies: too few inliers, a degenerate F (rank below 2, non-finite), an epipole
+  inside an image (no rectification keeps such an image in one piece), homographies that fold
+  an image over the line at infinity or stretch it beyond ``max_stretch``, and OpenCV's own
+  failure;
+- the orientation: Hartley's rotation puts image b's epipole on the positive x axis, so a rig
+  whose epipole lies to the left comes out upside down (or mirrored); both homographies are
+  turned back so that "up" stays up and "right" stays right (the same turn for both keeps the
+  rows aligned);
+- the framing: one similarity for both images (same scale, same offset, so corresponding rows
+  stay equal) that keeps image a's centre at its native pixel scale and centres the region both
+  images cover (rows present in both, columns of either) in an output of a fixed size (image
+  a's size unless asked otherwise). Vertical disparities are therefore in native pixels.
+
+Pixels follow the project's convention: x_b^T F x_a = 0, (u, v) with the origin at the centre
+of the top-left pixel, u right, v down.
+
+    rect = rectify_uncalibrated(F, pts_a[inliers], pts_b[inliers], (w_a, h_a), (w_b, h_b))
+    left_rect, right_rect = rect.warp(left, right)
+    np.median(vertical_disparity(rect.H_a, rect.H_b, pts_a, pts_b))   # px, rectified
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+ERROR_KINDS = (
+    "bad_input",
+    "too_few_inliers",
+    "degenerate_f",
+    "epipole_inside",
+    "distorted",
+    "opencv_failed",
+)
+# The fewest inlier matches accepted: H_a's fit has 3 unknowns, and a handful of matches would
+# let one wrong match tilt the rows.
+MIN_INLIERS = 15
+# The largest ratio of the local area scales of a rectified image (largest over smallest, over
+# its corners and centre) accepted: beyond it a part of the image is squeezed to a sliver.
+MAX_STRETCH = 10.0
+# Singular-value ratio s2/s1 of F below which F counts as rank 1 (no epipolar geometry).
+RANK_TOL = 1e-9
+
+
+class RectificationError(ValueError):
+    """F and the matches give no usable rectification. ``kind`` is one of ``ERROR_KINDS``."""
+
+    def __init__(self, kind: str, message: str) -> None:
+        super().__init__(message)
+        self.kind = kind
+
+
+@dataclass(frozen=True)
+class Rectification:
+    """Two rectifying homographies and the size of the images they map into.
+
+    Attributes:
+        H_a, H_b: (3, 3) float64, pixels of image a (b) -> pixels of rectified image a (b);
+            after them corresponding points have equal v.
+        size: (width, height) of both rectified images, px.
+        size_a, size_b: (width, height) of the input images the homographies are for.
+        inliers: number of matches the homographies were fitted and checked on.
+    """
+
+    H_a: np.ndarray
+    H_b: np.ndarray
+    size: tuple[int, int]
+    size_a: tuple[int, int]
+    size_b: tuple[int, int]
+    inliers: int
+
+    def warp(
+        self, image_a: np.ndarray, image_b: np.ndarray, interpolation: int = cv2.INTER_LINEAR
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Rectify an image pair: (H, W[, C]) arrays of sizes ``size_a`` and ``size_b`` ->
+        two arrays of ``size`` (same dtype and channels), black outside the inputs.
+
+        Raises:
+            ValueError: an image's size is not the one the homographies are for.
+        """
+        for name, image, size in (("a", image_a, self.size_a), ("b", image_b, self.size_b)):
+            got = (int(image.shape[1]), int(image.shape[0])) if image.ndim >= 2 else None
+            if got != tuple(size):
+                raise ValueError(f"image {name} is {got} (w, h); the rectification is for {size}")
+        return (
+            cv2.warpPerspective(image_a, self.H_a, self.size, flags=interpolation),
+            cv2.warpPerspective(image_b, self.H_b, self.size, flags=interpolation),
+        )
+
+
+def apply_homography(H: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    """(N, 2) pixels -> (N, 2) pixels mapped by the (3, 3) homography H."""
+    x = np.asarray(pts, dtype=np.float64) @ H[:, :2].T + H[:, 2]
+    return x[:, :2] / x[:, 2:3]
+
+
+def vertical_disparity(
+    H_a: np.ndarray, H_b: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray
+) -> np.ndarray:
+    """(N,) |v_a - v_b| (px) of matches (N, 2) + (N, 2) after H_a and H_b (identities: before
+    rectification)."""
+    return np.abs(apply_homography(H_a, pts_a)[:, 1] - apply_homography(H_b, pts_b)[:, 1])
+
+
+def epipoles(F: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The epipoles of F (3, 3): (e_a, e_b), homogeneous (3,) unit vectors with F e_a = 0 and
+    F^T e_b = 0 (e_a is camera b's centre seen in image a)."""
+    _, _, vt = np.linalg.svd(F)
+    _, _, vt_t = np.linalg.svd(F.T)
+    return vt[2], vt_t[2]
+
+
+def _check_inputs(
+    F: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray, min_inliers: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Validated float64 copies: F (3, 3) forced to rank 2, pts (N, 2) each."""
+    F = np.asarray(F, dtype=np.float64)
+    pts_a = np.asarray(pts_a, dtype=np.float64)
+    pts_b = np.asarray(pts_b, dtype=np.float64)
+    if F.shape != (3, 3):
+        raise RectificationError("bad_input", f"F must be 3x3, got shape {F.shape}")
+    if pts_a.ndim != 2 or pts_a.shape[1:] != (2,) or pts_a.shape != pts_b.shape:
+        raise RectificationError(
+            "bad_input", f"matches must be two (N, 2) arrays, got {pts_a.shape} and {pts_b.shape}"
+        )
+    if not (np.isfinite(pts_a).all() and np.isfinite(pts_b).all()):
+        raise RectificationError("bad_input", "matches hold NaN or inf")
+    if len(pts_a) < min_inliers:
+        raise RectificationError(
+            "too_few_inliers", f"{len(pts_a)} inlier matches; rectification needs {min_inliers}"
+        )
+    if not np.isfinite(F).all():
+        raise RectificationError("degenerate_f", "F holds NaN or inf")
+    u, s, vt = np.linalg.svd(F)
+    if s[0] <= 0 or s[1] / s[0] < RANK_TOL:
+        raise RectificationError("degenerate_f", f"F has rank below 2 (singular values {s})")
+    return u @ np.diag([s[0], s[1], 0.0]) @ vt / s[0], pts_a, pts_b
+
+
+def _check_epipole(e: np.ndarray, size: tuple[int, int], name: str) -> None:
+    """Refuse an epipole (3,) inside image ``name`` of ``size`` (w, h) pixels."""
+    w, h = size
+    if abs(e[2]) < 1e-12:
+        return  # at infinity: the image is rectified by a rotation alone
+    u, v = e[0] / e[2], e[1] / e[2]
+    if -0.5 <= u <= w - 0.5 and -0.5 <= v <= h - 0.5:
+        raise RectificationError(
+            "epipole_inside",
+            f"the epipole of image {name} lies inside it at ({u:.0f}, {v:.0f}) px (motion toward"
+            " the scene, not a side-by-side rig): no rectification keeps the image in one piece",
+        )
+
+
+def _corners(size: tuple[int, int]) -> np.ndarray:
+    """(5, 2) the corners and the centre of an image of ``size`` (w, h), px."""
+    w, h = size
+    return np.array(
+        [[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5], [w / 2, h / 2]]
+    )
+
+
+def _jacobian(H: np.ndarray, p: np.ndarray) -> np.ndarray:
+    """(2, 2) derivative of the homography H at pixel p (2,)."""
+    x = H @ np.array([p[0], p[1], 1.0])
+    return (H[:2, :2] * x[2] - np.outer(x[:2], H[2, :2])) / x[2] ** 2
+
+
+def _check_shape(H: np.ndarray, size: tuple[int, int], name: str, max_stretch: float) -> None:
+    """Refuse an H that folds image ``name`` over the line at infinity or stretches it."""
+    pts = _corners(size)
+    w = pts @ H[2, :2] + H[2, 2]
+    if not (np.all(w > 0) or np.all(w < 0)):
+        raise RectificationError(
+            "distorted",
+            f"the rectification of image {name} crosses the line at infinity (the epipole is"
+            " too close to the image)",
+        )
+    scales = np.array([abs(np.linalg.det(_jacobian(H, p))) for p in pts])
+    stretch = scales.max() / max(scales.min(), 1e-300)
+    if not np.isfinite(stretch) or stretch > max_stretch:
+        raise RectificationError(
+            "distorted",
+            f"the rectification of image {name} stretches it {stretch:.1f}x more at one corner"
+            f" than at another (at most {max_stretch:g}x): the epipole is too close to the image",
+        )
+
+
+def _orient(H_a: np.ndarray, H_b: np.ndarray, size_a: tuple[int, int]) -> np.ndarray:
+    """(3, 3) the flip (identity, x, y or both) that keeps image a's "right" right and "up" up
+    after H_a; applied to both homographies it keeps the rows aligned."""
+    J = _jacobian(H_a, _corners(size_a)[4])
+    return np.diag([1.0 if J[0, 0] >= 0 else -1.0, 1.0 if J[1, 1] >= 0 else -1.0, 1.0])
+
+
+def _frame(
+    H_a: np.ndarray,
+    H_b: np.ndarray,
+    size_a: tuple[int, int],
+    size_b: tuple[int, int],
+    out_size: tuple[int, int],
+) -> np.ndarray:
+    """(3, 3) the similarity S for both images (see the module docstring): native scale at
+    image a's centre, the rows both images cover and the columns either covers centred in
+    ``out_size`` (w, h) px."""
+    scale = 1.0 / np.sqrt(abs(np.linalg.det(_jacobian(H_a, _corners(size_a)[4]))))
+    boxes = []
+    for H, size in ((H_a, size_a), (H_b, size_b)):
+        p = apply_homography(H, _corners(size)[:4]) * scale
+        boxes.append((p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max()))
+    x0, x1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    y0, y1 = max(b[2] for b in boxes), min(b[3] for b in boxes)
+    if y1 <= y0:
+        raise RectificationError("distorted", "the rectified images share no rows")
+    tx = (out_size[0] - 1) / 2 - (x0 + x1) / 2
+    ty = (out_size[1] - 1) / 2 - (y0 + y1) / 2
+    return np.array([[scale, 0.0, tx], [0.0, scale, ty], [0.0, 0.0, 1.0]])
+
+
+def rectify_uncalibrated(
+    F: np.ndarray,
+    pts_a: np.ndarray,
+    pts_b: np.ndarray,
+    size_a: tuple[int, int],
+    size_b: tuple[int, int],
+    out_size: tuple[int, int] | None = None,
+    min_inliers: int = MIN_INLIERS,
+    max_stretch: float = MAX_STRETCH,
+) -> Rectification:
+    """Rectifying homographies of an uncalibrated stereo pair.
+
+    Args:
+        F: (3, 3) with x_b^T F x_a = 0 in pixels (any scale; forced to rank 2).
+        pts_a, pts_b: (N, 2) pixels of F's inlier matches in image a and image b.
+        size_a, size_b: (width, height) of the two images, px.
+        out_size: (width, height) of the rectified images; default ``size_a``.
+        min_inliers: fewest matches accepted.
+        max_stretch: largest ratio of local area scales within one rectified image.
+    Returns:
+        A :class:`Rectification`.
+    Raises:
+        RectificationError: see the module docstring; ``kind`` names the reason.
+    """
+    F, pts_a, pts_b = _check_inputs(F, pts_a, pts_b, min_inliers)
+    size_a = (int(size_a[0]), int(size_a[1]))
+    size_b = (int(size_b[0]), int(size_b[1]))
+    out_size = size_a if out_size is None else (int(out_size[0]), int(out_size[1]))
+    if min(*size_a, *size_b, *out_size) <= 0:
+        raise RectificationError("bad_input", f"image sizes must be positive: {size_a}, {size_b}")
+    e_a, e_b = epipoles(F)
+    _check_epipole(e_a, size_a, "a")
+    _check_epipole(e_b, size_b, "b")
+    # OpenCV centres image b (its imgSize) before sending the epipole to infinity
+    ok, H_a, H_b = cv2.stereoRectifyUncalibrated(pts_a, pts_b, F, size_b, threshold=0)
+    if not ok or H_a is None or not (np.isfinite(H_a).all() and np.isfinite(H_b).all()):
+        raise RectificationError("opencv_failed", "OpenCV's stereoRectifyUncalibrated failed")
+    for H, size, name in ((H_a, size_a, "a"), (H_b, size_b, "b")):
+        _check_shape(H, size, name, max_stretch)
+    flip = _orient(H_a, H_b, size_a)
+    H_a, H_b = flip @ H_a, flip @ H_b
+    S = _frame(H_a, H_b, size_a, size_b, out_size)
+    H_a, H_b = S @ H_a, S @ H_b
+    return Rectification(
+        H_a=H_a / H_a[2, 2] if abs(H_a[2, 2]) > 1e-12 else H_a,
+        H_b=H_b / H_b[2, 2] if abs(H_b[2, 2]) > 1e-12 else H_b,
+        size=out_size,
+        size_a=size_a,
+        size_b=size_b,
+        inliers=len(pts_a),
+    )

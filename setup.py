@@ -5,7 +5,7 @@ Two ways to install, one setup.py:
 - ``pip install -e '.[ros,test]'`` in a plain Python environment: rclpy and the message packages
   come from the PyPI wheels in the ``ros`` extra; the one console command is ``sepfm_ros``.
 - ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
+  ``make_bag``, ``replay``, ``record``, ``process``, ``eval``, ``warm_up``, ``calibration_check`` and ``rectify`` are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds
@@ -28,6 +28,7 @@ EXECUTABLES = [
     "eval",
     "warm_up",
     "calibration_check",
+    "rectify",
 ]
 _WHEEL_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
 _building_wheel = bool(_WHEEL_COMMANDS.intersection(sys.argv[1:]))

@@ -8,8 +8,9 @@ module adds what a live consumer needs around it:
 - checks with a clear :class:`RectificationError` (``kind`` one of ``ERROR_KINDS``) instead of
   wild homographies: too few inliers, a degenerate F (rank below 2, non-finite), an epipole
   inside an image (no rectification keeps such an image in one piece), homographies that fold
-  an image over the line at infinity or stretch it beyond ``max_stretch``, and OpenCV's own
-  failure;
+  an image over the line at infinity or stretch it beyond ``max_stretch``, OpenCV's own
+  failure, and (when asked) a median vertical disparity of the matches above
+  ``max_vertical_px`` after rectification;
 - the orientation: Hartley's rotation puts image b's epipole on the positive x axis, so a rig
   whose epipole lies to the left comes out upside down (or mirrored); both homographies are
   turned back so that "up" stays up and "right" stays right (the same turn for both keeps the
@@ -41,6 +42,7 @@ ERROR_KINDS = (
     "epipole_inside",
     "distorted",
     "opencv_failed",
+    "vertical_disparity",
 )
 # The fewest inlier matches accepted: H_a's fit has 3 unknowns, and a handful of matches would
 # let one wrong match tilt the rows.
@@ -235,6 +237,7 @@ def rectify_uncalibrated(
     out_size: tuple[int, int] | None = None,
     min_inliers: int = MIN_INLIERS,
     max_stretch: float = MAX_STRETCH,
+    max_vertical_px: float | None = None,
 ) -> Rectification:
     """Rectifying homographies of an uncalibrated stereo pair.
 
@@ -245,6 +248,8 @@ def rectify_uncalibrated(
         out_size: (width, height) of the rectified images; default ``size_a``.
         min_inliers: fewest matches accepted.
         max_stretch: largest ratio of local area scales within one rectified image.
+        max_vertical_px: when given, the largest median |v_a - v_b| of the matches after
+            rectification, px.
     Returns:
         A :class:`Rectification`.
     Raises:
@@ -269,6 +274,14 @@ def rectify_uncalibrated(
     H_a, H_b = flip @ H_a, flip @ H_b
     S = _frame(H_a, H_b, size_a, size_b, out_size)
     H_a, H_b = S @ H_a, S @ H_b
+    if max_vertical_px is not None:
+        vd = float(np.median(vertical_disparity(H_a, H_b, pts_a, pts_b)))
+        if not vd <= max_vertical_px:
+            raise RectificationError(
+                "vertical_disparity",
+                f"the matches keep a median vertical disparity of {vd:.2f} px after"
+                f" rectification (at most {max_vertical_px:g} px)",
+            )
     return Rectification(
         H_a=H_a / H_a[2, 2] if abs(H_a[2, 2]) > 1e-12 else H_a,
         H_b=H_b / H_b[2, 2] if abs(H_b[2, 2]) > 1e-12 else H_b,

@@ -18,7 +18,7 @@ ground-truth F, so no method is scored on its own inlier set. Per pair, the medi
 
 - ``before``: in the input images;
 - ``sep4``: the default estimator (1 px), then :func:`rectify_uncalibrated` on its inliers
-  (OpenCV's ``stereoRectifyUncalibrated`` with the checks, orientation and framing of
+  (OpenCV's ``stereoRectifyUncalibrated`` with the checks and framing of
   ``sepfm_ros.pipeline.rectification``);
 - ``MAGSAC``: OpenCV's ``findFundamentalMat`` USAC_MAGSAC (1 px, confidence 0.99) on the same
   matches, then the same :func:`rectify_uncalibrated` on its inliers;
@@ -229,7 +229,7 @@ def main(argv: list[str] | None = None) -> int:
         f"{GT_PX:g} px of the ground-truth F (the same matches for every column; SIFT 2000, "
         f"ratio 0.8, seed 0), target under {TARGET_PX} px. `sep4` and `MAGSAC`: that F and its "
         "inliers into `rectify_uncalibrated` (OpenCV's stereoRectifyUncalibrated with the "
-        "package's checks, orientation and framing); `OpenCV raw`: MAGSAC's F into "
+        "package's checks and framing); `OpenCV raw`: MAGSAC's F into "
         "stereoRectifyUncalibrated as returned, no checks. Rotated pairs: the 10 shared stereo "
         "pairs (6 KITTI, 4 Tsukuba) with the right image warped by K R K^-1, R about "
         "(1, 1, 1)/sqrt(3). Refused: the rectifier's error kind (e.g. an epipole inside an "

@@ -11,10 +11,9 @@ module adds what a live consumer needs around it:
   an image over the line at infinity or stretch it beyond ``max_stretch``, OpenCV's own
   failure, and (when asked) a median vertical disparity of the matches above
   ``max_vertical_px`` after rectification;
-- the orientation: Hartley's rotation puts image b's epipole on the positive x axis, so a rig
-  whose epipole lies to the left comes out upside down (or mirrored); both homographies are
-  turned back so that "up" stays up and "right" stays right (the same turn for both keeps the
-  rows aligned);
+- (the orientation needs nothing: OpenCV turns image b by at most 90 degrees to put the
+  epipole on the x axis, so a side-by-side rig stays upright whichever side camera b is on,
+  and a rig stacked vertically comes out turned by 90 degrees, rows along its baseline);
 - the framing: one similarity for both images (same scale, same offset, so corresponding rows
   stay equal) that keeps image a's centre at its native pixel scale and centres the region both
   images cover (rows present in both, columns of either) in an output of a fixed size (image
@@ -197,13 +196,6 @@ def _check_shape(H: np.ndarray, size: tuple[int, int], name: str, max_stretch: f
         )
 
 
-def _orient(H_a: np.ndarray, H_b: np.ndarray, size_a: tuple[int, int]) -> np.ndarray:
-    """(3, 3) the flip (identity, x, y or both) that keeps image a's "right" right and "up" up
-    after H_a; applied to both homographies it keeps the rows aligned."""
-    J = _jacobian(H_a, _corners(size_a)[4])
-    return np.diag([1.0 if J[0, 0] >= 0 else -1.0, 1.0 if J[1, 1] >= 0 else -1.0, 1.0])
-
-
 def _frame(
     H_a: np.ndarray,
     H_b: np.ndarray,
@@ -270,8 +262,6 @@ def rectify_uncalibrated(
         raise RectificationError("opencv_failed", "OpenCV's stereoRectifyUncalibrated failed")
     for H, size, name in ((H_a, size_a, "a"), (H_b, size_b, "b")):
         _check_shape(H, size, name, max_stretch)
-    flip = _orient(H_a, H_b, size_a)
-    H_a, H_b = flip @ H_a, flip @ H_b
     S = _frame(H_a, H_b, size_a, size_b, out_size)
     H_a, H_b = S @ H_a, S @ H_b
     if max_vertical_px is not None:

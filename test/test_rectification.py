@@ -176,3 +176,12 @@ def test_rotated_case_matches_its_ground_truth(shared_data):
         return int((symmetric_epipolar_distance(case.F, pa, pb) < 1.0).sum())
 
     assert gt_matches(rotated) > 0.7 * gt_matches(straight) > 50
+
+
+def test_strided_point_arrays_are_read_as_points():
+    """Columns of one (N, 4) array (as a node reads a match list) are views with a row stride
+    of 4 values: OpenCV would read them as stored."""
+    F, pts_a, pts_b = synthetic_rig(np.array([-0.5, 0.05, 0.0]), 1.0)
+    rows = np.c_[pts_a, pts_b]
+    rect = rectify_uncalibrated(F, rows[:, :2], rows[:, 2:], SIZE, SIZE)
+    assert vertical_disparity(rect.H_a, rect.H_b, pts_a, pts_b).max() < 1e-6

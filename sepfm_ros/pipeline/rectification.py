@@ -126,8 +126,8 @@ def _check_inputs(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Validated float64 copies: F (3, 3) forced to rank 2, pts (N, 2) each."""
     F = np.asarray(F, dtype=np.float64)
-    pts_a = np.asarray(pts_a, dtype=np.float64)
-    pts_b = np.asarray(pts_b, dtype=np.float64)
+    pts_a = np.ascontiguousarray(pts_a, dtype=np.float64)  # OpenCV reads rows as stored
+    pts_b = np.ascontiguousarray(pts_b, dtype=np.float64)
     if F.shape != (3, 3):
         raise RectificationError("bad_input", f"F must be 3x3, got shape {F.shape}")
     if pts_a.ndim != 2 or pts_a.shape[1:] != (2,) or pts_a.shape != pts_b.shape:
@@ -257,7 +257,10 @@ def rectify_uncalibrated(
     _check_epipole(e_a, size_a, "a")
     _check_epipole(e_b, size_b, "b")
     # OpenCV centres image b (its imgSize) before sending the epipole to infinity
-    ok, H_a, H_b = cv2.stereoRectifyUncalibrated(pts_a, pts_b, F, size_b, threshold=0)
+    try:
+        ok, H_a, H_b = cv2.stereoRectifyUncalibrated(pts_a, pts_b, F, size_b, threshold=0)
+    except cv2.error as err:
+        raise RectificationError("opencv_failed", f"stereoRectifyUncalibrated: {err}") from None
     if not ok or H_a is None or not (np.isfinite(H_a).all() and np.isfinite(H_b).all()):
         raise RectificationError("opencv_failed", "OpenCV's stereoRectifyUncalibrated failed")
     for H, size, name in ((H_a, size_a, "a"), (H_b, size_b, "b")):

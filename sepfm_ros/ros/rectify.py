@@ -216,7 +216,7 @@ class RectifyNode(Node):
                 self,
                 input_topic(self, base, transport),
                 msg_type,
-                functools.partial(self._on_image, side=side),
+                lambda msg, side=side: self._on_image(msg, side),
                 self._values["input_reliability"],
                 on_lost=self._on_lost,
                 on_incompatible=self._on_incompatible,

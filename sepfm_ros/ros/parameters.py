@@ -202,9 +202,7 @@ def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
     return desc
 
 
-def parameter_error(
-    name: str, value: Any, params: Mapping[str, ParamSpec] = PARAMS
-) -> str | None:
+def parameter_error(name: str, value: Any, params: Mapping[str, ParamSpec] = PARAMS) -> str | None:
     """Why ``value`` is not acceptable for parameter ``name`` of ``params`` (None when it is)."""
     spec = params.get(name)
     if spec is None:

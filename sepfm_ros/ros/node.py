@@ -39,8 +39,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import MonitorConfig
-from sepfm_ros.geometry.camera import CameraModel
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
+from sepfm_ros.geometry.calibrated.camera import CameraModel
 from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
     Pipeline,

@@ -61,7 +61,6 @@ from sepfm_ros.pipeline.rectification import (
     vertical_disparity,
 )
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup, configure_dds
-from sepfm_ros.ros.health import LogThrottle
 from sepfm_ros.ros.image_conversion import (
     COLOR_SPACES,
     ImageDecodeError,
@@ -70,7 +69,6 @@ from sepfm_ros.ros.image_conversion import (
 )
 from sepfm_ros.ros.messages import copy_header, diagnostic_array, health_status, stamp_ns
 from sepfm_ros.ros.node_main import spin_until_shutdown
-from sepfm_ros.ros.pairing import Frame, StereoPairing
 from sepfm_ros.ros.parameters import (
     PARAMS as NODE_PARAMS,
 )
@@ -81,8 +79,10 @@ from sepfm_ros.ros.parameters import (
     parameters_help,
 )
 from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
-from sepfm_ros.ros.sync import LEFT, RIGHT
 from sepfm_ros.ros.typed_msgs import fundamental_from_msg
+from sepfm_ros.stream.health import LogThrottle
+from sepfm_ros.stream.pairing import Frame, StereoPairing
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 NODE_NAME = "rectify"
 LOG_THROTTLE_S = 10.0

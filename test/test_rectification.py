@@ -17,6 +17,7 @@ from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.pipeline.rectification import (
     RectificationError,
     apply_homography,
+    coverage,
     epipoles,
     rectify_uncalibrated,
     vertical_disparity,
@@ -116,7 +117,7 @@ def test_failure_modes_raise_their_kind(case, kind):
     elif case == "forward":  # camera b moves toward the scene: epipole near the centre
         F, pts_a, pts_b = synthetic_rig(np.array([0.05, 0.02, -1.0]), 0.5)
     elif case == "near":  # mostly sideways, a bit forward: epipole just outside image a
-        F, pts_a, pts_b = synthetic_rig(np.array([-1.0, 0.0, -1.3]), 0.0)
+        F, pts_a, pts_b = synthetic_rig(np.array([-1.0, 0.0, -1.3]), 0.0)  # at (705, 240)
         e_a = epipoles(F)[0]
         assert not 0 <= e_a[0] / e_a[2] < SIZE[0]  # outside, so the epipole check passes
     elif case == "shape":
@@ -185,3 +186,14 @@ def test_strided_point_arrays_are_read_as_points():
     rows = np.c_[pts_a, pts_b]
     rect = rectify_uncalibrated(F, rows[:, :2], rows[:, 2:], SIZE, SIZE)
     assert vertical_disparity(rect.H_a, rect.H_b, pts_a, pts_b).max() < 1e-6
+
+
+def test_coverage_of_the_output_and_of_the_image():
+    F, pts_a, pts_b = synthetic_rig(np.array([-0.5, 0.05, 0.0]), 1.0)
+    rect = rectify_uncalibrated(F, pts_a, pts_b, SIZE, SIZE)
+    for H in (rect.H_a, rect.H_b):
+        covered, kept = coverage(H, SIZE, rect.size)
+        assert covered > 0.9 and kept > 0.9
+    half = np.diag([0.5, 0.5, 1.0])  # the image shrunk into the top-left quarter
+    assert coverage(half, SIZE, SIZE) == pytest.approx((0.25, 1.0), abs=0.01)
+    assert coverage(np.linalg.inv(half), SIZE, SIZE)[1] == pytest.approx(0.25, abs=0.03)

@@ -8,15 +8,15 @@ module adds what a live consumer needs around it:
 - checks with a clear :class:`RectificationError` (``kind`` one of ``ERROR_KINDS``) instead of
   wild homographies: too few inliers, a degenerate F (rank below 2, non-finite), an epipole
   inside an image (no rectification keeps such an image in one piece), homographies that fold
-  an image over the line at infinity or stretch it beyond ``max_stretch``, OpenCV's own
-  failure, and (when asked) a median vertical disparity of the matches above
-  ``max_vertical_px`` after rectification;
+  an image over the line at infinity, a framed image that covers less than ``min_coverage`` of
+  the output or keeps less of itself in it, OpenCV's own failure, and (when asked) a median
+  vertical disparity of the matches above ``max_vertical_px`` after rectification;
 - (the orientation needs nothing: OpenCV turns image b by at most 90 degrees to put the
   epipole on the x axis, so a side-by-side rig stays upright whichever side camera b is on,
   and a rig stacked vertically comes out turned by 90 degrees, rows along its baseline);
 - the framing: one similarity for both images (same scale, same offset, so corresponding rows
   stay equal) that keeps image a's centre at its native pixel scale and centres the region both
-  images cover (rows present in both, columns of either) in an output of a fixed size (image
+  images cover (the bounding boxes' common rows and columns) in an output of a fixed size (image
   a's size unless asked otherwise). Vertical disparities are therefore in native pixels.
 
 Pixels follow the project's convention: x_b^T F x_a = 0, (u, v) with the origin at the centre
@@ -46,9 +46,10 @@ ERROR_KINDS = (
 # The fewest inlier matches accepted: H_a's fit has 3 unknowns, and a handful of matches would
 # let one wrong match tilt the rows.
 MIN_INLIERS = 15
-# The largest ratio of the local area scales of a rectified image (largest over smallest, over
-# its corners and centre) accepted: beyond it a part of the image is squeezed to a sliver.
-MAX_STRETCH = 10.0
+# The least share of the output each framed rectified image must cover, and of each image the
+# output must keep: below it the pair has little in common left to match (an epipole just
+# outside an image stretches its far side out of any output at the centre's scale).
+MIN_COVERAGE = 0.3
 # Singular-value ratio s2/s1 of F below which F counts as rank 1 (no epipolar geometry).
 RANK_TOL = 1e-9
 
@@ -176,23 +177,14 @@ def _jacobian(H: np.ndarray, p: np.ndarray) -> np.ndarray:
     return (H[:2, :2] * x[2] - np.outer(x[:2], H[2, :2])) / x[2] ** 2
 
 
-def _check_shape(H: np.ndarray, size: tuple[int, int], name: str, max_stretch: float) -> None:
-    """Refuse an H that folds image ``name`` over the line at infinity or stretches it."""
-    pts = _corners(size)
-    w = pts @ H[2, :2] + H[2, 2]
+def _check_fold(H: np.ndarray, size: tuple[int, int], name: str) -> None:
+    """Refuse an H that folds image ``name`` of ``size`` (w, h) over the line at infinity."""
+    w = _corners(size) @ H[2, :2] + H[2, 2]
     if not (np.all(w > 0) or np.all(w < 0)):
         raise RectificationError(
             "distorted",
             f"the rectification of image {name} crosses the line at infinity (the epipole is"
             " too close to the image)",
-        )
-    scales = np.array([abs(np.linalg.det(_jacobian(H, p))) for p in pts])
-    stretch = scales.max() / max(scales.min(), 1e-300)
-    if not np.isfinite(stretch) or stretch > max_stretch:
-        raise RectificationError(
-            "distorted",
-            f"the rectification of image {name} stretches it {stretch:.1f}x more at one corner"
-            f" than at another (at most {max_stretch:g}x): the epipole is too close to the image",
         )
 
 
@@ -204,20 +196,39 @@ def _frame(
     out_size: tuple[int, int],
 ) -> np.ndarray:
     """(3, 3) the similarity S for both images (see the module docstring): native scale at
-    image a's centre, the rows both images cover and the columns either covers centred in
-    ``out_size`` (w, h) px."""
+    image a's centre, the rows and columns both images cover centred in ``out_size`` (w, h)
+    px."""
     scale = 1.0 / np.sqrt(abs(np.linalg.det(_jacobian(H_a, _corners(size_a)[4]))))
     boxes = []
     for H, size in ((H_a, size_a), (H_b, size_b)):
         p = apply_homography(H, _corners(size)[:4]) * scale
         boxes.append((p[:, 0].min(), p[:, 0].max(), p[:, 1].min(), p[:, 1].max()))
-    x0, x1 = min(b[0] for b in boxes), max(b[1] for b in boxes)
+    x0, x1 = max(b[0] for b in boxes), min(b[1] for b in boxes)
     y0, y1 = max(b[2] for b in boxes), min(b[3] for b in boxes)
-    if y1 <= y0:
-        raise RectificationError("distorted", "the rectified images share no rows")
+    if y1 <= y0 or x1 <= x0:
+        raise RectificationError("distorted", "the rectified images share no rows or columns")
     tx = (out_size[0] - 1) / 2 - (x0 + x1) / 2
     ty = (out_size[1] - 1) / 2 - (y0 + y1) / 2
     return np.array([[scale, 0.0, tx], [0.0, scale, ty], [0.0, 0.0, 1.0]])
+
+
+def coverage(
+    H: np.ndarray, size: tuple[int, int], out_size: tuple[int, int]
+) -> tuple[float, float]:
+    """How an image of ``size`` (w, h) and an output of ``out_size`` (w, h) overlap after the
+    homography H (which must not fold the image: :func:`_check_fold`): (the share of the output
+    the image covers, the share of the image inside the output), each 0..1; the second is
+    counted on a grid of 32 x 32 pixels."""
+    quad = apply_homography(H, _corners(size)[:4]).astype(np.float32)
+    w, h = out_size
+    box = np.array([[-0.5, -0.5], [w - 0.5, -0.5], [w - 0.5, h - 0.5], [-0.5, h - 0.5]])
+    if cv2.contourArea(quad, oriented=True) < 0:
+        quad = quad[::-1].copy()
+    area, _ = cv2.intersectConvexConvex(quad, box.astype(np.float32))
+    u, v = np.meshgrid(np.linspace(0, size[0] - 1, 32), np.linspace(0, size[1] - 1, 32))
+    p = apply_homography(H, np.c_[u.ravel(), v.ravel()])
+    inside = (p[:, 0] >= -0.5) & (p[:, 0] < w - 0.5) & (p[:, 1] >= -0.5) & (p[:, 1] < h - 0.5)
+    return float(area) / (w * h), float(inside.mean())
 
 
 def rectify_uncalibrated(
@@ -228,7 +239,7 @@ def rectify_uncalibrated(
     size_b: tuple[int, int],
     out_size: tuple[int, int] | None = None,
     min_inliers: int = MIN_INLIERS,
-    max_stretch: float = MAX_STRETCH,
+    min_coverage: float = MIN_COVERAGE,
     max_vertical_px: float | None = None,
 ) -> Rectification:
     """Rectifying homographies of an uncalibrated stereo pair.
@@ -239,7 +250,8 @@ def rectify_uncalibrated(
         size_a, size_b: (width, height) of the two images, px.
         out_size: (width, height) of the rectified images; default ``size_a``.
         min_inliers: fewest matches accepted.
-        max_stretch: largest ratio of local area scales within one rectified image.
+        min_coverage: least share of the output each framed image covers, and of each image
+            the output keeps (0..1).
         max_vertical_px: when given, the largest median |v_a - v_b| of the matches after
             rectification, px.
     Returns:
@@ -264,9 +276,18 @@ def rectify_uncalibrated(
     if not ok or H_a is None or not (np.isfinite(H_a).all() and np.isfinite(H_b).all()):
         raise RectificationError("opencv_failed", "OpenCV's stereoRectifyUncalibrated failed")
     for H, size, name in ((H_a, size_a, "a"), (H_b, size_b, "b")):
-        _check_shape(H, size, name, max_stretch)
+        _check_fold(H, size, name)
     S = _frame(H_a, H_b, size_a, size_b, out_size)
     H_a, H_b = S @ H_a, S @ H_b
+    for H, size, name in ((H_a, size_a, "a"), (H_b, size_b, "b")):
+        covered, kept = coverage(H, size, out_size)
+        if min(covered, kept) < min_coverage:
+            raise RectificationError(
+                "distorted",
+                f"rectified image {name} covers {100 * covered:.0f} % of the output and keeps"
+                f" {100 * kept:.0f} % of itself in it (at least {100 * min_coverage:.0f} % each):"
+                " the epipole is too close to the image, or the views share too little",
+            )
     if max_vertical_px is not None:
         vd = float(np.median(vertical_disparity(H_a, H_b, pts_a, pts_b)))
         if not vd <= max_vertical_px:

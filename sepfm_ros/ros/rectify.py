@@ -16,13 +16,13 @@ Each estimate with status ok, F in image pixels and its inlier matches gives two
 (:func:`sepfm_ros.pipeline.rectification.rectify_uncalibrated`; an estimate whose inliers keep
 a median vertical disparity above ``max_vertical_px`` after them is refused). Every image pair
 is rectified with the homographies of the latest good estimate received before it. They are
-**held**, not smoothed: a bad estimate (not ok, too few inliers, an epipole inside the image, a
-rectification that stretches an image, ...) leaves the previous homographies in use, and the
-next good one replaces them. Homographies of two estimates are not averaged because each pair
-(H_a, H_b) is consistent only with itself (Hartley's H_b fixes a rotation about the baseline,
-H_a a shear fitted to that estimate's matches): the mean of two solutions need not rectify. A
-rigid rig's F does not change, so the latest good one serves as well as a mean, and a knocked
-camera takes effect at its next good estimate.
+**held**, not smoothed: a bad estimate (not ok, too few inliers, an epipole inside the image,
+a framed image covering too little of the output, ...) leaves the previous homographies in
+use, and the next good one replaces them. Homographies of two estimates are not averaged
+because each pair (H_a, H_b) is consistent only with itself (Hartley's H_b fixes a rotation
+about the baseline, H_a a shear fitted to that estimate's matches): the mean of two solutions
+need not rectify. A rigid rig's F does not change, so the latest good one serves as well as a
+mean, and a knocked camera takes effect at its next good estimate.
 
 Bad input never stops the node: undecodable images, an image pair of another size than the
 estimate's, refused estimates and estimates whose matches never arrive are counted by kind in
@@ -53,7 +53,7 @@ from std_msgs.msg import Header
 
 from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.pipeline.rectification import (
-    MAX_STRETCH,
+    MIN_COVERAGE,
     MIN_INLIERS,
     Rectification,
     RectificationError,
@@ -106,11 +106,11 @@ _PARAMS: dict[str, ParamSpec] = {
         0.01,
         100.0,
     ),
-    "max_stretch": ParamSpec(
-        MAX_STRETCH,
-        "largest ratio of the local area scales within one rectified image (corners, centre)",
+    "min_coverage": ParamSpec(
+        MIN_COVERAGE,
+        "an estimate whose framed rectified images cover less of the output (share) is not used",
+        0.0,
         1.0,
-        1000.0,
     ),
     "diagnostics_period_s": ParamSpec(1.0, "period of the /diagnostics report, s", 0.1, 60.0),
 }
@@ -169,7 +169,7 @@ def rectification_from_estimate(
         (est.width_a, est.height_a),
         (est.width_b, est.height_b),
         min_inliers=int(values["min_inliers"]),
-        max_stretch=float(values["max_stretch"]),
+        min_coverage=float(values["min_coverage"]),
         max_vertical_px=float(values["max_vertical_px"]),
     )
     return rect, float(np.median(vertical_disparity(rect.H_a, rect.H_b, pts_a, pts_b)))

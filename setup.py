@@ -52,7 +52,10 @@ setup(
     python_requires=">=3.10",
     install_requires=[
         "numpy>=1.26",
-        "opencv-contrib-python-headless>=4.6",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
+        # the main wheel: two OpenCV wheels in one environment overwrite each other's cv2, and
+        # an extra cannot remove this one. AKAZE is offered where cv2 has it (OpenCV 4; OpenCV 5
+        # only in opencv-contrib-python-headless, installed instead of this wheel by the user).
+        "opencv-python-headless>=4.6",
         "rosbags>=0.11",
         "rosbags-image>=0.10.3",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second

@@ -12,7 +12,8 @@ TYPESTORE = get_typestore(Stores.ROS2_JAZZY)
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+TWO_VIEW_ESTIMATE = "sepfm_msgs/msg/TwoViewEstimate"
+MATCH_ARRAY = "sepfm_msgs/msg/MatchArray"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"

@@ -8,7 +8,11 @@ shared by the checks; shutdown gets nodes of its own. A unique ROS_DOMAIN_ID per
 
 from __future__ import annotations
 
+import ast
+import os
 import signal
+import subprocess
+import sys
 import time
 
 import cv2
@@ -423,6 +427,73 @@ def test_compressed_transport_jpeg_and_png(compressed, images, shared_data):
     send_pair(client, broken, numpy_to_compressed(images(img_b), "jpeg", header(stamp)))
     health = client.latest_health(after=1.2)
     assert int(health["errors_bad_compressed"]) == 1
+
+
+def readme_consumer(topic: str) -> str:
+    """README's five-line consumer, subscribed to ``topic``."""
+    text = (REPO / "README.md").read_text()
+    block = text.split("<!-- consumer:begin -->")[1].split("<!-- consumer:end -->")[0]
+    code = block.split("```python\n")[1].split("```")[0]
+    assert len(code.strip().splitlines()) == 5, code
+    assert '"/sepfm/estimate"' in code
+    return code.replace('"/sepfm/estimate"', repr(topic))
+
+
+def consumer_answers(path) -> list[tuple[str, np.ndarray | None]]:
+    """The consumer's lines: (status text, F (3, 3) or None)."""
+    out = []
+    for line in path.read_text().splitlines():
+        status, f = line.rsplit(" ", 1) if line.endswith("None") else line.split(" [", 1)
+        out.append((status, None if f == "None" else np.array(ast.literal_eval("[" + f))))
+    return out
+
+
+def test_typed_answers_reach_a_consumer_in_another_process(stereo, tmp_path):
+    """README's consumer in its own process gets one TwoViewEstimate per pair over DDS, with F
+    as 3x3 from ``msg.f``, the F the node answered."""
+    _, client = stereo
+    script, out = tmp_path / "consumer.py", tmp_path / "consumer.out"
+    script.write_text(readme_consumer("/sepfm_stereo/estimate"))
+    frames = stereo_sequence(n_frames=8, size=(480, 360), seed=11)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    with open(out, "w") as log:
+        consumer = subprocess.Popen([sys.executable, str(script)], stdout=log, stderr=log, env=env)
+    try:
+        # warm-up pairs until the consumer prints (discovery and matching take a moment)
+        for frame in frames[:5]:
+            stamp = next_stamp()
+            send_pair(client, *(image_msg(im, stamp) for im in frame.images))
+            client.wait_info(stamp)
+            deadline = time.monotonic() + 5.0
+            while not out.read_text() and time.monotonic() < deadline:
+                assert consumer.poll() is None, out.read_text()
+                time.sleep(0.05)
+            if out.read_text():
+                break
+        assert out.read_text(), "the consumer received nothing"
+        sent = []
+        for frame in frames[5:]:
+            stamp = next_stamp()
+            send_pair(client, *(image_msg(im, stamp) for im in frame.images))
+            _, F, _ = client.wait_outputs(stamp)
+            sent.append(F)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            got = [f for _, f in consumer_answers(out) if f is not None]
+            if got and np.array_equal(got[-1], sent[-1]):
+                break
+            time.sleep(0.05)
+        answers = consumer_answers(out)
+    finally:
+        consumer.terminate()
+        consumer.wait(timeout=15)
+    got = [f for _, f in answers]
+    assert all(status == "ok" for status, _ in answers[-3:]), answers
+    for F, received in zip(sent, got[-3:], strict=True):  # in order, each once, exact
+        assert received.shape == (3, 3)
+        np.testing.assert_array_equal(received, F)
+    for F in sent:
+        assert sum(f is not None and np.array_equal(f, F) for f in got) == 1
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

@@ -120,6 +120,7 @@ class PairAnswer:
         result: the pipeline's result (None for a failure record).
         cameras_update: what the camera_info gave this pair (None without calibration input).
         calibrated: the pose and check behind ``transform`` and ``calibration``.
+        error: the exception behind a ``STATUS_INTERNAL_ERROR`` record (for the log).
     """
 
     estimate: TwoViewEstimate
@@ -129,6 +130,7 @@ class PairAnswer:
     result: PipelineResult | None = None
     cameras_update: CamerasUpdate | None = None
     calibrated: CalibratedOutputs | None = None
+    error: BaseException | None = None
 
     @property
     def has_f(self) -> bool:
@@ -244,7 +246,7 @@ def internal_error_answer(
     msg = _base_message(headers, settings)
     msg.status = int(StatusCode.INTERNAL_ERROR)
     msg.status_text = f"internal error: {type(err).__name__}: {err}"
-    return PairAnswer(msg, _empty_matches(headers))
+    return PairAnswer(msg, _empty_matches(headers), error=err)
 
 
 def internal_error_kind(err: BaseException) -> str:

@@ -54,6 +54,7 @@ from sepfm_ros.ros.answer import (
     PairHeaders,
     answer_pair,
     decode_pair,
+    internal_error_text,
 )
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
@@ -467,6 +468,8 @@ def process_pair(
     if answer.result is None:
         stamp = format_stamp(stamp_ns(job.header.stamp))
         print(f"\npair at {stamp}: {answer.estimate.status_text}", file=sys.stderr)
+        if answer.error is not None:
+            print(internal_error_text(answer.error), file=sys.stderr)
     update = answer.cameras_update
     if update is not None and update.error is not None:
         print(f"\ncamera_info unusable: {update.reason}", file=sys.stderr)

@@ -14,8 +14,10 @@ same answer for the same pair; nothing else composes outputs. A pair's answer
   (``~/calibration_check``) of a calibrated stereo rig, or the ERROR status of unusable
   camera_info.
 
-The steps, for callers that split them over threads (the node matches one pair while it
-estimates the previous one): :func:`decode_pair` (images or a :class:`BadInput`), the
+Before pairing, :func:`precheck` skips an input message whose fields are unusable (the node in
+its callback, ``process`` as it reads the bag). The steps of a pair, for callers that split
+them over threads (the node matches one pair while it estimates the previous one):
+:func:`decode_pair` (images or a :class:`BadInput`), the
 pipeline's ``match``, then :func:`answer_matched`; :func:`failure_answer` answers a pair that
 never reached the estimator. :func:`answer_pair` does all of it in one call.
 """
@@ -41,7 +43,12 @@ from sepfm_ros.pipeline.calibration import CalibratedOutputs
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig, PipelineResult
 from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.calibration_msgs import relative_transform
-from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
+from sepfm_ros.ros.image_conversion import (
+    ImageDecodeError,
+    check_compressed,
+    check_image,
+    pair_to_numpy,
+)
 from sepfm_ros.ros.messages import copy_header
 from sepfm_ros.ros.typed_msgs import fundamental_field
 
@@ -137,6 +144,20 @@ class PairAnswer:
         return bool(self.estimate.has_f)
 
 
+def precheck(msg: Any) -> BadInput | None:
+    """The node's cheap check of one input message's fields (no pixel access), before it is
+    paired: a message that fails it is skipped (counted by kind), never paired or answered.
+    ``msg``: a sensor_msgs/Image or CompressedImage (rclpy or rosbags message)."""
+    try:
+        if hasattr(msg, "encoding"):
+            check_image(msg)
+        else:
+            check_compressed(msg)
+    except ImageDecodeError as err:
+        return BadInput(err.kind, str(err))
+    return None
+
+
 def decode_pair(msg_a: Any, msg_b: Any, stereo: bool) -> DecodedPair | BadInput:
     """Decode a pair's Image/CompressedImage messages to mono8 with one contrast for the pair.
 
@@ -220,8 +241,9 @@ def answer_matched(
     if cameras is not None and calibration is not None:
         if calibration.stream.calibration.rectified and coordinates == "undistorted":
             coordinates = "rectified"
+    has_infos = calibration is not None and calibration.infos is not None
     answer.estimate = estimate_message(
-        headers, result, settings, coordinates, answer.calibrated, update is not None
+        headers, result, settings, coordinates, answer.calibrated, has_infos
     )
     add_timings(answer.estimate, timings_ms or {})
     answer.matches = match_array(headers, result)
@@ -306,7 +328,8 @@ def estimate_message(
     calibration_input: bool,
 ) -> TwoViewEstimate:
     """A pipeline result -> TwoViewEstimate. F is given (``has_f``) when it exists and is ok,
-    or unreliable with ``settings.publish_unreliable``."""
+    or unreliable with ``settings.publish_unreliable``. ``calibration_input``: the pair had
+    camera_info messages (the pose fields say what became of them; empty without)."""
     est = result.estimate
     msg = _base_message(headers, settings)
     (msg.width_a, msg.height_a), (msg.width_b, msg.height_b) = result.size_a, result.size_b
@@ -344,10 +367,10 @@ def estimate_message(
 def _set_pose(
     msg: TwoViewEstimate, result: PipelineResult, calibrated: CalibratedOutputs | None
 ) -> None:
-    """The pose fields of a pair that had camera_info input."""
+    """The pose fields of a pair that had camera_info messages."""
     pose = None if calibrated is None else calibrated.pose
     if result.coordinates != "undistorted":
-        msg.pose_status = "no usable camera_info"
+        msg.pose_status = "camera_info unusable (see ~/calibration_check)"
         return
     if pose is None:
         msg.pose_status = f"no F: {result.estimate.status}"

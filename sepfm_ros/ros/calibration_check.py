@@ -43,6 +43,7 @@ from sepfm_ros.ros.answer import (
     PairHeaders,
     answer_pair,
     decode_pair,
+    precheck,
 )
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
@@ -193,7 +194,7 @@ def run_check(
                 msg = reader.deserialize(raw)
                 if raw.topic in sides:
                     rig.infos[sides[raw.topic]] = msg
-                else:
+                elif precheck(msg) is None:  # as the node: unusable fields are never paired
                     yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
         def check_ready() -> None:

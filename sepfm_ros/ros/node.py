@@ -59,16 +59,12 @@ from sepfm_ros.ros.answer import (
     internal_error_answer,
     internal_error_kind,
     internal_error_text,
+    precheck,
 )
 from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
-from sepfm_ros.ros.image_conversion import (
-    ImageDecodeError,
-    check_compressed,
-    check_image,
-)
 from sepfm_ros.ros.memory import (
     release_free_memory,
 )
@@ -316,13 +312,9 @@ class SepfmNode(Node):
 
     def _precheck(self, msg: Any, topic: str) -> bool:
         """Cheap field validation in the callback (no pixel access); False when skipped."""
-        try:
-            if self._transport == "raw":
-                check_image(msg)
-            else:
-                check_compressed(msg)
-        except ImageDecodeError as err:
-            self._bad_input(err.kind, f"{topic}: {err}")
+        bad = precheck(msg)
+        if bad is not None:
+            self._bad_input(bad.kind, f"{topic}: {bad.text}")
             return False
         return True
 

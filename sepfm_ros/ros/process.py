@@ -36,7 +36,7 @@ import argparse
 import bisect
 import sys
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -50,13 +50,15 @@ from tqdm import tqdm
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.answer import (
     AnswerSettings,
+    BadInput,
     PairCalibration,
     PairHeaders,
     answer_pair,
     decode_pair,
     internal_error_text,
+    precheck,
 )
-from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.bags.errors import BagCorruptError, BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import (
@@ -132,6 +134,7 @@ class InputStamps:
 
     topics: tuple[str, ...]
     sequence: list[tuple[str, int]]
+    skipped: list[tuple[str, int, BadInput]] = field(default_factory=list)
 
     @cached_property
     def stamps(self) -> dict[str, list[int]]:
@@ -145,6 +148,13 @@ class InputStamps:
         """One line per topic whose stamps repeat, step back or jump back, saying what the
         pairing (the node's) does with them."""
         lines = []
+        for topic in self.topics:
+            bad = [b for t, _, b in self.skipped if t == topic]
+            if bad:
+                lines.append(
+                    f"warning: {topic}: {len(bad)} message(s) with unusable fields are skipped, "
+                    f"as the node skips them (first: {bad[0].kind}: {bad[0].text})"
+                )
         for topic, stamps in self.stamps.items():
             skipped, restarts = stamp_order_effects(stamps, jump_back_s)
             if skipped or restarts:
@@ -207,12 +217,13 @@ def iter_pairs(
     topic's newest is skipped, a jump back of more than ``stamp_jump_reset_s`` restarts the
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
-    msg_class = CompressedImage if spec.transport == "compressed" else Image
+    msg_class = input_class(spec)
 
     def events() -> Iterator[tuple[str, int, Any, int]]:
         for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
-            yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
+            if precheck(msg) is None:  # as the node, skip unusable fields before pairing
+                yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
     for p in paired_frames(spec, params, slop_ns, events()):
@@ -229,14 +240,33 @@ def iter_pairs(
         )
 
 
+def input_class(spec: InputSpec) -> type:
+    """The message class of the input topics: CompressedImage or Image."""
+    return CompressedImage if spec.transport == "compressed" else Image
+
+
 def validate_inputs(reader: BagReader, spec: InputSpec) -> InputStamps:
-    """Scan the input topics' header stamps before any output exists.
+    """Scan the input topics' header stamps before any output exists, and check each message's
+    fields as the node does before pairing (:func:`~sepfm_ros.ros.answer.precheck`).
 
     Raises BagCorruptError (unreadable data). Irregular stamps are not refused: the pairing
-    skips or restarts on them as the node does (:meth:`InputStamps.warnings`).
+    skips or restarts on them as the node does, and a message with unusable fields is skipped
+    as in the node (:meth:`InputStamps.warnings`).
     """
-    sequence = [(raw.topic, header_stamp_ns(raw.data)) for raw in reader.messages(spec.topics)]
-    return InputStamps(tuple(spec.topics), sequence)
+    msg_class = input_class(spec)
+    sequence, skipped = [], []
+    for raw in reader.messages(spec.topics):
+        stamp = header_stamp_ns(raw.data)
+        try:
+            msg = deserialize_message(raw.data, msg_class)
+        except Exception as err:  # noqa: BLE001 - any CDR the message class cannot read
+            raise BagCorruptError(f"{raw.topic}: unreadable message at {stamp} ns: {err}") from None
+        bad = precheck(msg)
+        if bad is None:
+            sequence.append((raw.topic, stamp))
+        else:
+            skipped.append((raw.topic, stamp, bad))
+    return InputStamps(tuple(spec.topics), sequence, skipped)
 
 
 def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:

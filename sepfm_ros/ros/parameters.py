@@ -112,7 +112,7 @@ PARAMS: dict[str, ParamSpec] = {
     "publish_unreliable": ParamSpec(
         True,
         "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
-        " plane); ~/estimate_info then carries the reason at WARN level",
+        " plane); ~/estimate's status then says why",
     ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
     "use_camera_info": ParamSpec(

@@ -64,7 +64,8 @@ register_sepfm_msgs(TYPESTORE)
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
+TWO_VIEW_ESTIMATE = "sepfm_msgs/msg/TwoViewEstimate"
+MATCH_ARRAY = "sepfm_msgs/msg/MatchArray"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"

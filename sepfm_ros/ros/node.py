@@ -53,6 +53,7 @@ from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
+    ZeroStepNotes,
     check_compressed,
     check_image,
     pair_to_numpy,
@@ -143,6 +144,7 @@ class SepfmNode(Node):
             raise ValueError("invalid parameters: " + "; ".join(errors))
         self._mode = values["mode"]
         self._transport = values["transport"]
+        self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
         self._pending_config: PipelineConfig | None = None
@@ -305,6 +307,8 @@ class SepfmNode(Node):
         try:
             if self._transport == "raw":
                 check_image(msg)
+                if msg.step == 0 and (note := self._zero_step.note(topic, msg)) is not None:
+                    self.get_logger().warning(note)
             else:
                 check_compressed(msg)
         except ImageDecodeError as err:

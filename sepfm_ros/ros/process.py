@@ -47,7 +47,12 @@ from tqdm import tqdm
 
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
+from sepfm_ros.ros.bags.inputs import (
+    InputSpec,
+    camera_info_topics,
+    detect_inputs,
+    no_pairs_reason,
+)
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import (
     CAMERA_INFO,
@@ -61,7 +66,7 @@ from sepfm_ros.ros.bags.types import (
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.calibrated import CalibratedStream
-from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
+from sepfm_ros.ros.image_conversion import ImageDecodeError, ZeroStepNotes, pair_to_numpy
 from sepfm_ros.ros.messages import (
     copy_header,
     estimate_info,
@@ -200,10 +205,13 @@ def iter_pairs(
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
     msg_class = CompressedImage if spec.transport == "compressed" else Image
+    zero_step = ZeroStepNotes()
 
     def events() -> Iterator[tuple[str, int, Any, int]]:
         for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
+            if (note := zero_step.note(raw.topic, msg)) is not None:
+                print(f"\nsepfm_ros process: warning: {note}", file=sys.stderr, flush=True)
             yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
@@ -268,7 +276,7 @@ class CameraInfos:
 
 def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
     """The camera_info beside each input topic, when the bag has them all (else None)."""
-    topics = spec.camera_info_topics()
+    topics = camera_info_topics(reader, spec)
     if not all(t in reader.topics and reader.topics[t].count for t in topics):
         return None
     for t in topics:
@@ -374,11 +382,10 @@ def run_process(
                 flush=True,
             )
         total = inputs.pair_count(spec, params, slop_ns)
-        if total == 0 and spec.mode == "stereo" and all(inputs.stamps.values()):
-            raise BagError(
-                f"no stereo pairs: no {spec.topics[0]} image has a {spec.topics[1]} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set -p sync_slop_s:=SECONDS)"
-            )
+        if total == 0:
+            frames = {t: len(v) for t, v in inputs.stamps.items()}
+            gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
+            raise BagError(no_pairs_reason(spec, frames, gap, slop_ns, flag))
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))

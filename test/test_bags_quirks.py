@@ -214,8 +214,8 @@ def test_eval_bags_names_a_bag_that_gives_no_pair(frames, tmp_path):
     pairs, errors = load_bag_pairs(bag, tmp_path / "frames")
     assert pairs == [] and len(errors) == 1
     assert f"{RIGHT_TOPIC} has 0 frame(s)" in errors[0].message
-    res = _cli("eval", "--bags", str(bag), "--out", str(tmp_path / "eval"), "--cache", "none",
-               "--methods", "cv-ransac", "--seeds", "0", "--no-progress")  # fmt: skip
+    flags = ["--cache", "none", "--methods", "cv-ransac", "--seeds", "0", "--no-progress"]
+    res = _cli("eval", "--bags", str(bag), "--out", str(tmp_path / "eval"), *flags)
     assert res.returncode != 0 and f"{RIGHT_TOPIC} has 0 frame(s)" in res.stderr, res.stderr
 
 
@@ -255,3 +255,42 @@ def test_big_endian_16_bit_images_through_process(sequence, frames, tmp_path, ca
     for r, frame in zip(results, sequence, strict=True):
         assert r.F is not None, r.status
         assert gt_error_px(r.F, pair_fundamental(*frame.cameras), *r.pts()) < 1.0
+
+
+# ----------------------------------------------------------------------------- exit codes
+def _padded_step_zero(ts, header, img: np.ndarray):
+    """``step`` 0 on padded rows: the data length disagrees with packed rows (undecodable)."""
+    msg = _image(ts, header, np.pad(img, ((0, 0), (0, 8))))
+    msg.width, msg.step = img.shape[1], 0
+    return msg
+
+
+def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_padded_step_zero)
+    res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
+    assert "step 0 is smaller than a row" in res.stderr  # the reason, per pair
+    assert f"error: none of the {N_FRAMES} pairs could be decoded" in res.stderr
+
+
+def test_record_exits_non_zero_when_nothing_was_recorded(tmp_path, ros_domain_id):
+    out = tmp_path / "rec"
+    res = _cli("record", "-o", str(out), "--duration", "1", "/nobody/publishes/this", timeout=120)
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    assert "warning: never saw a publisher of /nobody/publishes/this" in res.stderr
+    assert "error: nothing recorded" in res.stderr
+    with BagReader(out) as reader:  # still a readable (empty) bag
+        assert reader.message_count == 0
+
+
+def test_eval_exits_non_zero_when_a_bag_gives_no_pair(sequence, frames, tmp_path):
+    gt = [pair_fundamental(*f.cameras) for f in sequence]
+    good = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, ground_truth=gt)
+    bad = _stereo_without_right(tmp_path / "no_right", frames[0][0], ground_truth=True)
+    out = tmp_path / "eval"
+    flags = ["--cache", "none", "--methods", "cv-ransac", "--seeds", "0", "--no-progress"]
+    res = _cli("eval", "--bags", str(good), "--bags", str(bad), "--out", str(out), *flags)
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
+    assert f"error: no pair from --bags {bad}" in res.stderr
+    rows = (out / "runs.csv").read_text().splitlines()[1:]
+    assert len(rows) == N_FRAMES  # the good bag was still evaluated and reported

@@ -24,7 +24,8 @@ scored against the ground truth when the bag has it. Every result is flushed to 
 is computed (see :class:`~sepfm_ros.ros.bags.writer.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
 
-Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
+Exit codes: 0 done, 1 bad input (message on stderr, no traceback: an unreadable bag, no pair to
+form, an output name of another format, no pair whose images decode), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -78,6 +79,7 @@ from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_ord
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
+    FrameResult,
     calibrated_topics,
     format_summary,
     format_table,
@@ -298,6 +300,11 @@ def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -
     if spec.mode == "stereo":
         return min(counts)
     return max(0, counts[0] - int(params["frame_gap"]))
+
+
+def decoded(result: FrameResult) -> bool:
+    """The pair's images were decoded (its result is not a bad-input record)."""
+    return not result.status.startswith("bad input")
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
@@ -600,6 +607,7 @@ def main(argv: list[str]) -> int:
         return 1
     if args.table:
         print(format_table(results))
+    undecoded = not interrupted and total > 0 and not any(decoded(r) for r in results)
     expected = None if interrupted else total
     print(format_summary(summarize(results, expected)))
     if interrupted:
@@ -610,4 +618,11 @@ def main(argv: list[str]) -> int:
         )
         return 130
     print(f"wrote {args.output}: {done} of {total} pairs")
+    if undecoded:
+        print(
+            f"sepfm_ros process: error: none of the {total} pairs could be decoded (the reasons "
+            "are above)",
+            file=sys.stderr,
+        )
+        return 1
     return 0

@@ -47,7 +47,7 @@ from sepfm_ros.ros.answer import (
     precheck,
 )
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import detect_inputs
+from sepfm_ros.ros.bags.inputs import detect_inputs, no_pairs_reason
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibrated import CalibratedStream
@@ -150,8 +150,8 @@ def run_check(
     with BagReader(args.bag) as reader:
         spec = detect_inputs(reader, "stereo", args.left, args.right)
         left, right = spec.topics
-        left_info = args.left_info or camera_info_topic(left)
-        right_info = args.right_info or camera_info_topic(right)
+        left_info = reader.resolve(args.left_info or camera_info_topic(left))
+        right_info = reader.resolve(args.right_info or camera_info_topic(right))
         rectified = args.rectified == "yes" or args.rectified == "auto" and spec.rectified()
         for topic in (left_info, right_info):
             if topic not in reader.topics:
@@ -169,10 +169,8 @@ def run_check(
         slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
         total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
         if total == 0:
-            raise BagError(
-                f"no stereo pairs: no {left} image has a {right} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
-            )
+            frames = {t: len(v) for t, v in inputs.stamps.items()}
+            raise BagError(no_pairs_reason(spec, frames, 0, slop_ns, "--sync-slop"))
         if args.max_pairs:
             total = min(total, args.max_pairs)
         rig = _Rig(rectified, _monitor_config(args))

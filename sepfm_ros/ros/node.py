@@ -64,6 +64,7 @@ from sepfm_ros.ros.answer import (
 from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.memory import (
     release_free_memory,
 )
@@ -155,6 +156,7 @@ class SepfmNode(Node):
             raise ValueError("invalid parameters: " + "; ".join(errors))
         self._mode = values["mode"]
         self._transport = values["transport"]
+        self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
         self._pending_config: PipelineConfig | None = None
@@ -316,6 +318,8 @@ class SepfmNode(Node):
         if bad is not None:
             self._bad_input(bad.kind, f"{topic}: {bad.text}")
             return False
+        if getattr(msg, "step", None) == 0 and (note := self._zero_step.note(topic, msg)):
+            self.get_logger().warning(note)
         return True
 
     def _offer(self, job: Job) -> None:

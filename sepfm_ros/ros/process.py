@@ -27,7 +27,8 @@ scored against the ground truth when the bag has it. Every result is flushed to 
 is computed (see :class:`~sepfm_ros.ros.bags.writer.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
 
-Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
+Exit codes: 0 done, 1 bad input (message on stderr, no traceback: an unreadable bag, no pair to
+form, an output name of another format, no pair whose images decode), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -47,6 +48,7 @@ from rosbags.interfaces import QosTime as _QosTime
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from tqdm import tqdm
 
+from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.answer import (
     AnswerSettings,
@@ -59,7 +61,12 @@ from sepfm_ros.ros.answer import (
     precheck,
 )
 from sepfm_ros.ros.bags.errors import BagCorruptError, BagError
-from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
+from sepfm_ros.ros.bags.inputs import (
+    InputSpec,
+    camera_info_topics,
+    detect_inputs,
+    no_pairs_reason,
+)
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import (
     CAMERA_INFO,
@@ -74,10 +81,12 @@ from sepfm_ros.ros.bags.types import (
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.calibrated import CalibratedStream
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.messages import copy_header, stamp_ns
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
+    FrameResult,
     calibrated_topics,
     format_summary,
     format_table,
@@ -218,12 +227,16 @@ def iter_pairs(
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
     msg_class = input_class(spec)
+    zero_step = ZeroStepNotes()
 
     def events() -> Iterator[tuple[str, int, Any, int]]:
         for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
-            if precheck(msg) is None:  # as the node, skip unusable fields before pairing
-                yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
+            if precheck(msg) is not None:  # as the node, skip unusable fields before pairing
+                continue
+            if (note := zero_step.note(raw.topic, msg)) is not None:
+                print(f"\nsepfm_ros process: warning: {note}", file=sys.stderr, flush=True)
+            yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
     for p in paired_frames(spec, params, slop_ns, events()):
@@ -306,7 +319,7 @@ class CameraInfos:
 
 def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
     """The camera_info beside each input topic, when the bag has them all (else None)."""
-    topics = spec.camera_info_topics()
+    topics = camera_info_topics(reader, spec)
     if not all(t in reader.topics and reader.topics[t].count for t in topics):
         return None
     for t in topics:
@@ -328,6 +341,13 @@ def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -
     if spec.mode == "stereo":
         return min(counts)
     return max(0, counts[0] - int(params["frame_gap"]))
+
+
+def decoded(result: FrameResult) -> bool:
+    """The pair's images were decoded (its result is not a bad-input record)."""
+    return (
+        result.estimate is not None and result.estimate.status != TwoViewEstimate.STATUS_BAD_INPUT
+    )
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
@@ -412,11 +432,10 @@ def run_process(
                 flush=True,
             )
         total = inputs.pair_count(spec, params, slop_ns)
-        if total == 0 and spec.mode == "stereo" and all(inputs.stamps.values()):
-            raise BagError(
-                f"no stereo pairs: no {spec.topics[0]} image has a {spec.topics[1]} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set -p sync_slop_s:=SECONDS)"
-            )
+        if total == 0:
+            frames = {t: len(v) for t, v in inputs.stamps.items()}
+            gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
+            raise BagError(no_pairs_reason(spec, frames, gap, slop_ns, flag))
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
@@ -591,6 +610,7 @@ def main(argv: list[str]) -> int:
         return 1
     if args.table:
         print(format_table(results))
+    undecoded = not interrupted and total > 0 and not any(decoded(r) for r in results)
     expected = None if interrupted else total
     print(format_summary(summarize(results, expected)))
     if interrupted:
@@ -601,4 +621,11 @@ def main(argv: list[str]) -> int:
         )
         return 130
     print(f"wrote {args.output}: {done} of {total} pairs")
+    if undecoded:
+        print(
+            f"sepfm_ros process: error: none of the {total} pairs could be decoded (the reasons "
+            "are above)",
+            file=sys.stderr,
+        )
+        return 1
     return 0

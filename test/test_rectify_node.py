@@ -1,8 +1,12 @@
-"""``sepfm_ros rectify`` over real DDS: a test publisher sends a real stereo pair (KITTI, right
-image rotated 2 degrees) and the TwoViewEstimate + MatchArray of the pipeline's estimate on it;
-the rectifier publishes left/right image_rect with the inputs' stamps and sizes, rows aligned
-(SIFT matches between the two published images at under 0.5 px vertical disparity), holds its
-homographies through bad estimates, and counts bad input without stopping."""
+"""``sepfm_ros rectify`` over real DDS.
+
+- With a test publisher: a real stereo pair (KITTI, right image rotated 2 degrees) and the
+  TwoViewEstimate + MatchArray of the pipeline's estimate on it; the rectifier publishes
+  left/right image_rect with the inputs' stamps and sizes, rows aligned (SIFT matches between
+  the two published images at under 0.5 px vertical disparity), holds its homographies through
+  bad estimates, and counts bad input without stopping.
+- End to end: the sepfm node and the rectifier on the same image topics, at their defaults.
+"""
 
 from __future__ import annotations
 
@@ -235,3 +239,58 @@ def test_rectifier_over_dds(rotated_pair, ros_domain_id, tmp_path):
         code = proc.stop()
         ros.close()
     assert code == 0, proc.output()
+
+
+def test_rectifier_behind_the_sepfm_node(rotated_pair, ros_domain_id, tmp_path):
+    """The real node's ~/estimate and ~/matches drive the rectifier: the same image stream in,
+    rectified pairs out with the inputs' stamps, rows aligned."""
+    case, _ = rotated_pair
+    ros = Ros()
+    listener = Listener(ros)
+    pubs = {
+        "left": ros.node.create_publisher(Image, "/cam/left/image_raw", RELIABLE),
+        "right": ros.node.create_publisher(Image, "/cam/right/image_raw", RELIABLE),
+    }
+    inputs = ("-r", "left/image_raw:=/cam/left/image_raw",
+              "-r", "right/image_raw:=/cam/right/image_raw")  # fmt: skip
+    node = NodeProcess("sepfm_e2e", tmp_path, "-p", "mode:=stereo", *inputs)
+    rect = NodeProcess(
+        NAME, tmp_path, *inputs, "-p", "diagnostics_period_s:=0.2",
+        "-r", "sepfm/estimate:=/sepfm_e2e/estimate", "-r", "sepfm/matches:=/sepfm_e2e/matches",
+        "-r", "left/image_rect:=/left/image_rect", "-r", "right/image_rect:=/right/image_rect",
+        command="rectify",
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 3 * TIMEOUT  # the node loads its kernels first
+        while any(p.get_subscription_count() < 2 for p in pubs.values()) or (
+            ros.node.count_subscribers("/sepfm_e2e/estimate") == 0
+        ):
+            for proc in (node, rect):
+                assert proc.proc.poll() is None, proc.output()
+            assert time.monotonic() < deadline, "the two nodes did not come up"
+            time.sleep(0.1)
+        got = None
+        while got is None and time.monotonic() < deadline:
+            s = next_stamp()
+            pubs["left"].publish(image_msg(case.image_a, s))
+            pubs["right"].publish(image_msg(case.image_b, s))
+            end = time.monotonic() + 2.0
+            while got is None and time.monotonic() < end:
+                with listener.lock:
+                    if s in listener.rect["left"] and s in listener.rect["right"]:
+                        got = listener.rect["left"][s], listener.rect["right"][s]
+                time.sleep(0.05)
+        assert got is not None, "no rectified pair"
+        left, right = got
+        h, w = case.image_a.shape
+        assert (left.width, left.height) == (right.width, right.height) == (w, h)
+        assert left.header.frame_id == right.header.frame_id == "cam"
+        assert row_disparity(image_to_numpy(left), image_to_numpy(right)) < TARGET_PX
+    except AssertionError as err:
+        raise AssertionError(
+            f"{err}\nnode:\n{node.output()[-3000:]}\nrectifier:\n{rect.output()[-3000:]}"
+        ) from None
+    finally:
+        codes = (node.stop(), rect.stop())
+        ros.close()
+    assert codes == (0, 0)

@@ -29,6 +29,12 @@ from sensor_msgs.msg import Image  # noqa: E402
 
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineResult  # noqa: E402
 from sepfm_ros.pipeline.rectification import rectify_uncalibrated  # noqa: E402
+from sepfm_ros.ros.answer import (  # noqa: E402
+    AnswerSettings,
+    PairHeaders,
+    estimate_message,
+    match_array,
+)
 from sepfm_ros.ros.image_conversion import image_to_numpy  # noqa: E402
 from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
@@ -36,11 +42,7 @@ from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
 import bench_rectify  # noqa: E402
 
-TwoViewEstimate, Match, MatchArray = (
-    sepfm_msgs.TwoViewEstimate,
-    sepfm_msgs.Match,
-    sepfm_msgs.MatchArray,
-)
+TwoViewEstimate, MatchArray = sepfm_msgs.TwoViewEstimate, sepfm_msgs.MatchArray
 NAME = "rectify_test"
 TIMEOUT = 60.0  # s; the machine is shared
 TARGET_PX = 0.5
@@ -49,34 +51,15 @@ TARGET_PX = 0.5
 def estimate_messages(
     result: PipelineResult, stamp: int, status: int | None = None
 ) -> tuple[TwoViewEstimate, MatchArray]:
-    """The TwoViewEstimate and MatchArray a sepfm node would publish for ``result`` (the
-    fields the rectifier reads), stamped ``stamp``; ``status`` overrides the estimate's."""
-    est = result.estimate
-    msg = TwoViewEstimate(header=header(stamp), stamp_a=header(stamp).stamp)
-    msg.stamp_b = header(stamp).stamp
-    msg.width_a, msg.height_a = result.size_a
-    msg.width_b, msg.height_b = result.size_b
-    msg.has_f = est.F is not None
-    msg.f = fundamental_field(est.F if est.F is not None else np.zeros((3, 3)))
-    msg.status = int(est.code) if status is None else status
-    msg.status_text = "ok" if status is None else "forced by the test"
-    msg.coordinates = result.coordinates
-    msg.matches, msg.inliers = len(result.matches), int(est.inliers.sum())
-    arr = MatchArray(header=header(stamp), stamp_a=msg.stamp_a, stamp_b=msg.stamp_b)
-    m = result.matches
-    arr.matches = [
-        Match(
-            u_a=float(a[0]),
-            v_a=float(a[1]),
-            u_b=float(b[0]),
-            v_b=float(b[1]),
-            error_px=float(e),
-            inlier=bool(i),
-            on_line=False,
-        )  # fmt: skip
-        for a, b, e, i in zip(m.pts_a, m.pts_b, result.errors, est.inliers, strict=True)
-    ]
-    return msg, arr
+    """The TwoViewEstimate and MatchArray the sepfm node publishes for ``result`` (its answer
+    path), stamped ``stamp``; ``status`` overrides the estimate's status."""
+    h = header(stamp)
+    headers = PairHeaders(h, h, h)
+    settings = AnswerSettings.of(bench_rectify.CONFIG, publish_unreliable=False)
+    msg = estimate_message(headers, result, settings, result.coordinates, None, False)
+    if status is not None:
+        msg.status, msg.status_text = status, "forced by the test"
+    return msg, match_array(headers, result)
 
 
 def row_disparity(img_a: np.ndarray, img_b: np.ndarray) -> float:

@@ -215,6 +215,7 @@ def test_rectifier_over_dds(rotated_pair, ros_domain_id, tmp_path):
         listener.wait_pair(s_left, s_right)
         health = listener.wait_count("published", 3)
         assert int(health["estimates_used"]) == 1
+        assert not [k for k in health if k.startswith("internal_")], health
         assert proc.proc.poll() is None
     except AssertionError as err:
         raise AssertionError(f"{err}\nrectifier's output:\n{proc.output()}") from None

@@ -265,12 +265,14 @@ def _padded_step_zero(ts, header, img: np.ndarray):
     return msg
 
 
-def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+def test_process_exits_non_zero_when_no_frame_is_usable(frames, tmp_path):
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_padded_step_zero)
     res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
     assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
-    assert "step 0 is smaller than a row" in res.stderr  # the reason, per pair
-    assert f"error: none of the {N_FRAMES} pairs could be decoded" in res.stderr
+    # the node skips such a frame before pairing (its field check), and so does process
+    assert "step 0 is smaller than a row" in res.stderr  # the reason
+    assert "error: no stereo pairs" in res.stderr
+    assert f"({2 * N_FRAMES} message(s) with unusable fields were skipped" in res.stderr
 
 
 def test_record_exits_non_zero_when_nothing_was_recorded(tmp_path, ros_domain_id):

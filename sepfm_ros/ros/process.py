@@ -435,7 +435,13 @@ def run_process(
         if total == 0:
             frames = {t: len(v) for t, v in inputs.stamps.items()}
             gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
-            raise BagError(no_pairs_reason(spec, frames, gap, slop_ns, flag))
+            reason = no_pairs_reason(spec, frames, gap, slop_ns, flag)
+            if inputs.skipped:
+                reason += (
+                    f" ({len(inputs.skipped)} message(s) with unusable fields were skipped, as "
+                    "the node skips them: see the warnings above)"
+                )
+            raise BagError(reason)
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))

@@ -96,9 +96,7 @@ def _input_bag_pairs(
             continue
         pairs.append(PairSpec(pid, bag.name, F, img_a=paths[0], img_b=paths[1], kind=spec.mode))
     if not pairs and not errors:
-        frames = {t: len(v) for t, v in inputs.stamps.items()}
-        gap = int(params["frame_gap"])
-        why = no_pairs_reason(spec, frames, gap, slop_ns, None)
+        why = no_pairs_reason(spec, inputs.counts, int(params["frame_gap"]), slop_ns, None)
         errors.append(PairError(bag.name, bag.name, f"bag {bag}: {why}"))
     return pairs, errors
 

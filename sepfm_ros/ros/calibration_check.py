@@ -181,8 +181,7 @@ def run_check(
         slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
         total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
         if total == 0:
-            frames = {t: len(v) for t, v in inputs.stamps.items()}
-            raise BagError(no_pairs_reason(spec, frames, 0, slop_ns, "--sync-slop"))
+            raise BagError(no_pairs_reason(spec, inputs.counts, 0, slop_ns, "--sync-slop"))
         if args.max_pairs:
             total = min(total, args.max_pairs)
         rig = _Rig(rectified)

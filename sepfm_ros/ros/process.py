@@ -140,6 +140,11 @@ class InputStamps:
             out[topic].append(stamp)
         return out
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """Each topic's number of frames."""
+        return {t: len(v) for t, v in self.stamps.items()}
+
     def warnings(self, jump_back_s: float) -> list[str]:
         """One line per topic whose stamps repeat, step back or jump back, saying what the
         pairing (the node's) does with them."""
@@ -390,9 +395,8 @@ def run_process(
             )
         total = inputs.pair_count(spec, params, slop_ns)
         if total == 0:
-            frames = {t: len(v) for t, v in inputs.stamps.items()}
             gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
-            raise BagError(no_pairs_reason(spec, frames, gap, slop_ns, flag))
+            raise BagError(no_pairs_reason(spec, inputs.counts, gap, slop_ns, flag))
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))

@@ -93,7 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder for cached matches, keyed by image content + settings "
         "(default: .cache/eval_matches); 'none' disables caching",
     )
-    p.add_argument("--features", choices=FEATURES, default="sift", help="default: sift")
+    p.add_argument(
+        "--features",
+        choices=FEATURES,
+        default="sift",
+        help="default: sift; akaze where this OpenCV has it (OpenCV 4, OpenCV 5's contrib wheel)",
+    )
     p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default: 0.8)")
     p.add_argument(
         "--max-features",

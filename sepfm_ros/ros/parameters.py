@@ -17,8 +17,8 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 
-from sepfm_ros.geometry import DEFAULT_METHOD, METHODS
-from sepfm_ros.geometry.calibration_check import MonitorConfig
+from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
 
@@ -82,7 +82,12 @@ PARAMS: dict[str, ParamSpec] = {
         1e6,
     ),
     "frame_gap": ParamSpec(1, "motion: F between frame t - frame_gap and frame t", 1, 100),
-    "features": ParamSpec("orb", "feature detector/descriptor", choices=FEATURES),
+    "features": ParamSpec(
+        "orb",
+        "feature detector/descriptor (akaze where this OpenCV has it: OpenCV 4, or OpenCV 5's "
+        "contrib wheel)",
+        choices=FEATURES,
+    ),
     "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
     "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
     "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
@@ -107,7 +112,7 @@ PARAMS: dict[str, ParamSpec] = {
     "publish_unreliable": ParamSpec(
         True,
         "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
-        " plane); ~/estimate_info then carries the reason at WARN level",
+        " plane); ~/estimate's status then says why",
     ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
     "use_camera_info": ParamSpec(
@@ -225,7 +230,7 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     if int(values.get("hough_width_px", 0)) > 0:
         options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
     kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}
-    return PipelineConfig(**kwargs, estimator_options=options)
+    return PipelineConfig(**kwargs, estimator_options=EstimatorOptions(**options))
 
 
 def parameters_help() -> str:

@@ -38,7 +38,7 @@ from sepfm_ros.ros.bags.crash_safety import (
 )
 from sepfm_ros.ros.bags.errors import BagError, OutputExistsError, UnknownTypeError
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
-from sepfm_ros.ros.bags.types import TYPESTORE
+from sepfm_ros.ros.bags.types import SEPFM_MSGS, TYPESTORE
 
 # file names of storage formats this writer does not write (it writes a rosbag2 folder, mcap)
 _OTHER_FORMATS = {".bag": "a ROS 1 bag file", ".db3": "a rosbag2 sqlite3 file"}
@@ -144,7 +144,10 @@ class BagWriter:
                 raise BagError(f"topic {topic} already has type {old.msgtype}, not {msgtype}")
             return
         if (msgdef is None or rihs01 is None) and msgtype not in TYPESTORE.fielddefs:
-            raise UnknownTypeError(f"cannot write {topic}: unknown message type {msgtype}")
+            hint = ""
+            if msgtype.startswith(f"{SEPFM_MSGS}/"):
+                hint = f" ({SEPFM_MSGS} is not installed: pip install ./{SEPFM_MSGS})"
+            raise UnknownTypeError(f"cannot write {topic}: unknown message type {msgtype}{hint}")
         self._topics[topic] = _Topic(topic, msgtype, tuple(qos), msgdef, rihs01)
         if self._writer is not None:
             self._connect(self._topics[topic])

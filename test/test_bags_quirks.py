@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from robot_bags import (
     COMPRESSED_T,
+    IMAGE_T,
     LEFT_TOPIC,
     RIGHT_TOPIC,
     bag_path,
@@ -242,11 +243,30 @@ def _padded_step_zero(ts, header, img: np.ndarray):
     return msg
 
 
-def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+def test_process_names_frames_skipped_for_their_fields(frames, tmp_path):
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_padded_step_zero)
     res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
     assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
-    assert "step 0 is smaller than a row" in res.stderr  # the reason, per pair
+    assert "step 0 is smaller than a row" in res.stderr  # the reason
+    assert f"{LEFT_TOPIC} has 0 frame(s) ({N_FRAMES} more skipped: unusable fields)" in res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def _all_nan(ts, header, img: np.ndarray):
+    """A 32FC1 image without one finite pixel: its fields pass, its pixels cannot be mapped."""
+    h, w = img.shape[:2]
+    data = np.full((h, w), np.nan, "<f4").tobytes()
+    return ts.types[IMAGE_T](
+        header=header, height=h, width=w, encoding="32FC1", is_bigendian=0, step=4 * w,
+        data=np.frombuffer(data, np.uint8),
+    )  # fmt: skip
+
+
+def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_all_nan)
+    res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
+    assert "has no finite pixel" in res.stderr  # the reason, per pair
     assert f"error: none of the {N_FRAMES} pairs could be decoded" in res.stderr
 
 

@@ -7,7 +7,7 @@ Two ways to install, one setup.py:
   package ``sepfm_msgs`` is built from its folder (pip cannot declare a local dependency); the
   one console command is ``sepfm_ros``.
 - ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
+  ``make_bag``, ``replay``, ``record``, ``process``, ``eval``, ``warm_up``, ``calibration_check`` and ``rectify`` are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds
@@ -30,6 +30,7 @@ EXECUTABLES = [
     "eval",
     "warm_up",
     "calibration_check",
+    "rectify",
 ]
 # What building sepfm_msgs needs from PyPI: its pyproject.toml's ros-jazzy-* build requirements
 # (including those the ROS wheels need but do not declare).

@@ -78,6 +78,10 @@ setup(
             "ros-jazzy-common-interfaces",
         ],
         "poselib": ["poselib"],
+        # `sepfm_ros audit`: the fleet audit runs on Dask distributed (chosen over Ray:
+        # docs/design.md, figures in docs/benchmarks.md); psutil is distributed's own dependency.
+        # python3-distributed-pip in package.xml / rosdep.yaml.
+        "fleet": ["distributed>=2024.1"],
         "test": [
             "pytest>=7",
             "hypothesis>=6",
@@ -85,6 +89,7 @@ setup(
             "colcon-core",
             "colcon-ros",
             "poselib",
+            "distributed>=2024.1",  # the audit tests (the fleet extra)
         ],
     },
     zip_safe=True,

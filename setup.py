@@ -28,6 +28,7 @@ EXECUTABLES = [
     "eval",
     "warm_up",
     "calibration_check",
+    "audit",
 ]
 _WHEEL_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
 _building_wheel = bool(_WHEEL_COMMANDS.intersection(sys.argv[1:]))

@@ -109,8 +109,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
         "--slice-s",
         type=float,
         default=DEFAULT_SLICE_S,
-        help="split bags longer than this into time slices of at most this many seconds "
-        "(0: never)",
+        help="split bags longer than this into time slices of at most this many seconds (0: never)",
     )
     p.add_argument(
         "--rig-from",
@@ -163,9 +162,7 @@ def _options(args: argparse.Namespace) -> Options:
 def bag_keys(bags: Iterable[Path], opts: Options) -> dict[str, str]:
     """bag -> resume key (bag files, parameters and input choice, package version)."""
     settings = {**opts.params, "inputs": vars(opts.choice)}
-    return {
-        str(b): task_key(b, bag_fingerprint(b), settings, sepfm_ros.__version__) for b in bags
-    }
+    return {str(b): task_key(b, bag_fingerprint(b), settings, sepfm_ros.__version__) for b in bags}
 
 
 def _token() -> str:

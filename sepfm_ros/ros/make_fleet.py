@@ -129,9 +129,8 @@ def make_fleet(
                     drift_frame, drifted = 0, True
             path = out / f"day{d}" / f"{plan.name}_{d}"
             path.parent.mkdir(parents=True, exist_ok=True)
-            write_bag(
-                path, _messages(plan.name, calibs, chunk, start, period, drift_frame, plan.drift_deg)
-            )
+            msgs = _messages(plan.name, calibs, chunk, start, period, drift_frame, plan.drift_deg)
+            write_bag(path, msgs)
             written.append(
                 FleetBag(
                     path,

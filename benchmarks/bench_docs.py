@@ -36,6 +36,7 @@ SECTIONS = {
     "bench_robustness": "python benchmarks/bench_robustness.py --write-docs",
     "bench_engines": "python benchmarks/bench_engines.py --write-docs",
     "bench_audit": "python benchmarks/bench_audit.py --write-docs",
+    "bench_rigs": "python benchmarks/bench_rigs.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

@@ -223,7 +223,7 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.serialization import deserialize_message
 
-    from sepfm_ros.geometry.calibration_check import LEVEL_NAMES
+    from sepfm_ros.geometry.calibrated.calibration_check import LEVEL_NAMES
     from sepfm_ros.ros.results import calibrated_topics
 
     poses = [r.info for r in results if r.info and r.info.get("pose_status") == "ok"]

@@ -294,7 +294,7 @@ def test_a_definition_rosbags_cannot_verify_does_not_lose_the_bag(kitti_frames, 
 def test_calibration_check_on_a_lagging_ros1_robot_bag(kitti_frames, shared_data, tmp_path):
     """calibration_check reads a robot's ROS 1 bag as process does: its topic names picked,
     the camera_info beside them, the right camera 12 ms late; KITTI's own calibration is OK."""
-    from sepfm_ros.geometry.pose import pose_from_projections
+    from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 
     cams = json.loads((shared_data / "cameras.json").read_text())
     K_a, _, _, t = pose_from_projections(

@@ -9,9 +9,9 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import WARN, CalibrationStatus
-from sepfm_ros.geometry.camera import CalibrationError
-from sepfm_ros.geometry.pose import RelativePose
+from sepfm_ros.geometry.calibrated.calibration_check import WARN, CalibrationStatus
+from sepfm_ros.geometry.calibrated.camera import CalibrationError
+from sepfm_ros.geometry.calibrated.pose import RelativePose
 from sepfm_ros.ros.calibration_msgs import (
     calibration_error_status,
     calibration_status,

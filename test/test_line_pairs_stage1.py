@@ -9,12 +9,9 @@ import cv2
 import numpy as np
 import pytest
 
-from sepfm_ros.geometry.line_homography_fit import (
-    line_homography_error,
-    stage1_ransac,
-    transfer_errors,
-)
-from sepfm_ros.geometry.line_pairs import (
+from sepfm_ros.geometry.robust.loop import run_ransac
+from sepfm_ros.geometry.robust.trials import trials_needed
+from sepfm_ros.geometry.separable.line_pairs import (
     LineSearchOptions,
     control_points,
     hough_lines,
@@ -23,7 +20,11 @@ from sepfm_ros.geometry.line_pairs import (
     rank_line_pairs,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import run_ransac, trials_needed
+from sepfm_ros.geometry.separable.stage1 import (
+    line_homography_error,
+    stage1_ransac,
+    transfer_errors,
+)
 from sepfm_ros.geometry.solvers.line_homography import (
     line_homography_3pt,
     line_homography_3pt_kernel,
@@ -263,7 +264,8 @@ def test_control_points_are_the_farthest_border_intersections():
 
 
 class _LineHomographyProblem:
-    """Stage 1 written as a :class:`sepfm_ros.geometry.ransac.Problem` for the generic loop."""
+    """Stage 1 written as a :class:`sepfm_ros.geometry.robust.contract.Problem` for the generic
+    loop."""
 
     sample_size = 3
 

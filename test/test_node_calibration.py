@@ -22,7 +22,7 @@ from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
-from sepfm_ros.geometry.pose import pose_from_projections  # noqa: E402
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections  # noqa: E402
 from sepfm_ros.ros.make_bag import camera_info_message, camera_infos  # noqa: E402
 from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 

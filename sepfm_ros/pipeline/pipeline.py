@@ -41,11 +41,12 @@ from sepfm_ros.geometry import (
     DEFAULT_METHOD,
     METHODS,
     Estimate,
+    EstimatorOptions,
     StatusCode,
     estimate_fundamental,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.camera import CameraModel, undistort_points
+from sepfm_ros.geometry.calibrated.camera import CameraModel, undistort_points
 from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
 
 # The fewest matches any estimator method accepts (eight-point needs 8).
@@ -68,7 +69,7 @@ class PipelineConfig:
         seed: seed of every random choice of the estimator; the same for every pair, so a pair
             of images gives the same F live and offline.
         max_matches: keep at most this many best matches for the estimator (0 = all).
-        estimator_options: extra keyword options passed to ``estimate_fundamental`` as-is.
+        estimator_options: the estimator's options (``EstimatorOptions``; default: its defaults).
     """
 
     features: str = "orb"
@@ -79,7 +80,7 @@ class PipelineConfig:
     confidence: float = 0.99
     seed: int = 0
     max_matches: int = 0
-    estimator_options: dict[str, Any] = field(default_factory=dict)
+    estimator_options: EstimatorOptions = field(default_factory=EstimatorOptions)
 
     def __post_init__(self) -> None:
         errors = config_errors(self)
@@ -342,7 +343,7 @@ class Pipeline:
 
         Args:
             cameras: optional (camera of image a, camera of image b). When given, the matched
-                points are undistorted (:func:`~sepfm_ros.geometry.camera.undistort_points`,
+                points are undistorted (:func:`undistort_points`,
                 the identity for D = 0) before estimation, so F, ``matches`` and ``errors`` are
                 in undistorted pixels of K (``result.coordinates == "undistorted"``); timed as
                 stage "undistort".
@@ -440,7 +441,7 @@ def _estimate(
             threshold=cfg.threshold_px,
             confidence=cfg.confidence,
             seed=cfg.seed,
-            **cfg.estimator_options,
+            options=cfg.estimator_options,
         )
     except ValueError as err:  # the estimator's "bad input" contract
         return Estimate(

@@ -17,8 +17,8 @@ from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TransformStamped
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import CalibrationMonitor, MonitorConfig
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.calibrated.calibration_check import CalibrationMonitor, MonitorConfig
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
 from sepfm_ros.pipeline.calibration import StreamCalibration
 from sepfm_ros.pipeline.pipeline import PipelineResult
 from sepfm_ros.ros.calibration_msgs import (

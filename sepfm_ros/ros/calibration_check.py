@@ -2,7 +2,8 @@
 
 For every stereo pair in the bag, matches the images with the node's pipeline (estimated in
 undistorted pixels of K, or rectified pixels), measures the inlier matches against the
-calibration from the bag's ``camera_info`` topics (:mod:`sepfm_ros.geometry.calibration_check`)
+calibration from the bag's ``camera_info`` topics
+(:mod:`sepfm_ros.geometry.calibrated.calibration_check`)
 and runs the same sliding-window monitor as the node. Prints one line per pair and the
 decision; writes ``calibration_check.png`` (error over time) and ``calibration_check.csv`` into
 ``--out``.
@@ -28,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from sepfm_ros.geometry.calibration_check import (
+from sepfm_ros.geometry.calibrated.calibration_check import (
     LEVEL_NAMES,
     OK,
     CalibrationMonitor,
@@ -38,7 +39,7 @@ from sepfm_ros.geometry.calibration_check import (
     StereoCalibration,
     check_pair,
 )
-from sepfm_ros.geometry.camera import CalibrationError
+from sepfm_ros.geometry.calibrated.camera import CalibrationError
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs

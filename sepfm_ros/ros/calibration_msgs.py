@@ -1,7 +1,8 @@
 """ROS messages of calibrated estimation: CameraInfo in, pose and calibration check out.
 
 - :func:`camera_model_from_info`: ``sensor_msgs/CameraInfo`` (rclpy or rosbags message) ->
-  validated :class:`~sepfm_ros.geometry.camera.CameraModel` (CalibrationError with the reason).
+  validated :class:`~sepfm_ros.geometry.calibrated.camera.CameraModel` (CalibrationError with
+  the reason).
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
 - :func:`pose_values`: the same pose as ``~/estimate_info`` key/values.
@@ -18,9 +19,9 @@ from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import CalibrationStatus
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel, camera_model
-from sepfm_ros.geometry.pose import RelativePose, pose_of_b_in_a
+from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
+from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
 from sepfm_ros.ros.messages import copy_header, health_status
 
 CALIBRATION_STATUS_SUFFIX = ": calibration"

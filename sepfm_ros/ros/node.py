@@ -6,11 +6,11 @@ This module wires the parts together; each lives in its own module:
 
 - :mod:`sepfm_ros.ros.parameters`: the parameters, their validation and the pipeline config;
 - :mod:`sepfm_ros.ros.subscriptions`: the image topics (remaps, ``compressed``) and their QoS;
-- :mod:`sepfm_ros.ros.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
+- :mod:`sepfm_ros.stream.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
   reset when stamps jump back;
-- :mod:`sepfm_ros.ros.scheduling`: the latest-only slots between the executor and the two
+- :mod:`sepfm_ros.stream.scheduling`: the latest-only slots between the executor and the two
   worker threads, and the policy when pairs come faster than the node processes them;
-- :mod:`sepfm_ros.ros.health`: counters, recent problems and the ``/diagnostics`` level.
+- :mod:`sepfm_ros.stream.health`: counters, recent problems and the ``/diagnostics`` level.
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair frames and offer the pair to the scheduler. Two worker threads then run the
@@ -39,8 +39,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import MonitorConfig
-from sepfm_ros.geometry.camera import CameraModel
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
+from sepfm_ros.geometry.calibrated.camera import CameraModel
 from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
     Pipeline,
@@ -50,7 +50,6 @@ from sepfm_ros.pipeline.pipeline import (
 from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
-from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
 from sepfm_ros.ros.image_conversion import (
     ImageDecodeError,
     check_compressed,
@@ -66,7 +65,6 @@ from sepfm_ros.ros.messages import (
     stamp_ns,
 )
 from sepfm_ros.ros.outputs import Answer, NodeOutputs
-from sepfm_ros.ros.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
 from sepfm_ros.ros.parameters import (
     NODE_NAME,
     PARAMS,
@@ -76,9 +74,11 @@ from sepfm_ros.ros.parameters import (
     parameter_error,
     pipeline_config,
 )
-from sepfm_ros.ros.scheduling import PairScheduler
 from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
-from sepfm_ros.ros.sync import LEFT, RIGHT
+from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
+from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
+from sepfm_ros.stream.scheduling import PairScheduler
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 # A recurring problem of one kind is logged at most once per this many seconds.

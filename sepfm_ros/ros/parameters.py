@@ -17,8 +17,8 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 
-from sepfm_ros.geometry import DEFAULT_METHOD, METHODS
-from sepfm_ros.geometry.calibration_check import MonitorConfig
+from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
 
@@ -225,7 +225,7 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     if int(values.get("hough_width_px", 0)) > 0:
         options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
     kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}
-    return PipelineConfig(**kwargs, estimator_options=options)
+    return PipelineConfig(**kwargs, estimator_options=EstimatorOptions(**options))
 
 
 def parameters_help() -> str:

@@ -69,7 +69,6 @@ from sepfm_ros.ros.messages import (
     result_to_pointcloud2,
     stamp_ns,
 )
-from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
@@ -81,7 +80,8 @@ from sepfm_ros.ros.results import (
     summarize,
 )
 from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
-from sepfm_ros.ros.sync import LEFT, RIGHT
+from sepfm_ros.stream.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
 _ZERO = _QosTime(0, 0)
@@ -170,7 +170,7 @@ def paired_frames(
     slop_ns: int | None,
     events: Iterable[tuple[str, int, Any, int]],
 ) -> Iterator[Paired]:
-    """The node's pairing (:mod:`sepfm_ros.ros.pairing`) of input events (topic, stamp ns,
+    """The node's pairing (:mod:`sepfm_ros.stream.pairing`) of input events (topic, stamp ns,
     item, log time ns) in bag order."""
     jump_s = float(params["stamp_jump_reset_s"])
     if spec.mode == "stereo":
@@ -195,7 +195,7 @@ def iter_pairs(
 ) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
-    Pairing is the node's (:mod:`sepfm_ros.ros.pairing`): a frame whose stamp is not after its
+    Pairing is the node's (:mod:`sepfm_ros.stream.pairing`): a frame whose stamp is not after its
     topic's newest is skipped, a jump back of more than ``stamp_jump_reset_s`` restarts the
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """

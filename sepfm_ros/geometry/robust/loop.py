@@ -1,133 +1,25 @@
-"""Generic RANSAC pieces: trial counts (the paper's F(k, r))."""
+"""The robust loop (LO-RANSAC with adaptive stopping F(k, r)) over one or more racing arms.
+
+Each arm is a :class:`~sepfm_ros.geometry.robust.contract.Problem`; several arms can race in one
+loop, which is how the separable estimator tries several line pairs and drops the ones whose
+support lags.
+"""
 
 from __future__ import annotations
 
-import math
 from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any
 
-import numba
 import numpy as np
 
+from sepfm_ros.geometry.robust.contract import Problem
+from sepfm_ros.geometry.robust.options import RaceOptions, SamplingOptions
+from sepfm_ros.geometry.robust.samplers import ProsacSampler, draw_samples
+from sepfm_ros.geometry.robust.sprt import Sprt
+from sepfm_ros.geometry.robust.trials import trial_count, trials_needed
 
-@numba.njit(cache=True, nogil=True)
-def trial_count(k: int, inlier_ratio: float, confidence: float) -> float:
-    """The paper's F(k, r) at r = 1 - ``inlier_ratio``, uncapped (inf when no sample of k can be
-    all inliers); the one implementation behind :func:`ransac_trials`, the RANSAC loop and the
-    compiled stage 1.
-
-    F(k, r) = ceil(log(1 - p) / log(1 - (1 - r)^k)), at least 1; p is ``confidence``.
-    """
-    w = inlier_ratio**k
-    if w >= 1.0:
-        return 1.0
-    if w <= 0.0:
-        return np.inf
-    denom = np.log1p(-w)
-    if denom == 0.0:
-        return np.inf
-    return max(1.0, np.ceil(np.log1p(-confidence) / denom))
-
-
-@numba.njit(cache=True, nogil=True)
-def trials_needed(k: int, count: int, n: int, confidence: float, cap: int) -> int:
-    """F(k, r) for the inlier ratio ``count`` / ``n`` of the best model so far, capped at ``cap``
-    (``cap`` before any inlier is known)."""
-    w = min(1.0, count / n) if n > 0 else 0.0
-    return int(min(trial_count(k, w, confidence), float(cap)))
-
-
-def ransac_trials(k: int, r: float, confidence: float = 0.99, max_trials: int | None = None) -> int:
-    """The paper's F(k, r): RANSAC trials needed to draw one all-inlier sample of size k.
-
-    F(k, r) = ceil(log(1 - p) / log(1 - (1 - r)^k)), with r the outlier rate and p the confidence.
-
-    Args:
-        k: sample size (number of correspondences drawn per trial), >= 1.
-        r: outlier rate in [0, 1].
-        confidence: probability p in (0, 1) of drawing at least one all-inlier sample.
-        max_trials: optional cap on the result.
-    Returns:
-        The number of trials (>= 1), or ``max_trials`` when r = 1 or the count exceeds it.
-    """
-    if k < 1:
-        raise ValueError(f"sample size k must be >= 1, got {k}")
-    if not 0.0 <= r <= 1.0:
-        raise ValueError(f"outlier rate r must be in [0, 1], got {r}")
-    if not 0.0 < confidence < 1.0:
-        raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    n = trial_count(int(k), 1.0 - r, float(confidence))
-    if max_trials is not None:
-        n = min(n, max_trials)
-    if n == math.inf:
-        raise ValueError("F(k, r) is infinite for r = 1; pass max_trials")
-    return max(1, int(n))
-
-
-# --------------------------------------------------------------------------------------------
-# The generic RANSAC loop (sample, minimal solve, score, local optimisation, adaptive stopping).
-# Estimators plug in as `Problem`s; several problems ("arms") can race in one loop, which is how
-# the separable estimator tries several line pairs and drops the ones whose support lags.
-# --------------------------------------------------------------------------------------------
-
-
-class Problem(Protocol):
-    """One RANSAC arm: what to sample, how to solve a sample, how to score a model."""
-
-    n: int  #: number of data points the inlier ratio refers to
-    sample_size: int  #: points drawn per sample (the k of F(k, r))
-    pool: np.ndarray  #: (P,) indices eligible for sampling
-
-    def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(B, k) pool indices -> (models (K, ...), sample index of each model (K,))."""
-
-    def score(self, models: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(K, ...) models -> (cost (K,), lower is better; inlier count (K,))."""
-
-    def local_optimize(self, model: np.ndarray) -> np.ndarray:
-        """Models (J, ...) refined from ``model`` and its inliers (J may be 0)."""
-
-    # Optional: ``polish(model, start) -> models (J, ...)``, a second local-optimisation step from
-    # ``start``, the best of ``model`` and its ``local_optimize`` results; when it returns
-    # models they are offered instead of those results.
-    # Optional: ``fixed_inliers(model) -> bool``, for problems whose samples all contain fixed
-    # points (the separable stage 2): whether those points are inliers of ``model``. When they
-    # are not inliers of the best model, no sample of the arm can be all-inlier for it: the
-    # arm stops counting toward the stop and is dropped (see ``_Run.consistent``).
-    # Optional: ``recount(model) -> int``, for problems whose inlier counts depend on the best
-    # model so far (LMedS: matches within its robust scale). With it an arm's support is the
-    # count of its lowest-cost model, re-counted whenever the best model improves, instead of
-    # the largest count any of its models had.
-    # Optional: ``race_share`` (float < 1), the most of all samples the arm may draw while an
-    # arm without a share is active (a hedge that runs beside the others at a fraction of
-    # their pace, e.g. stage 2's arm without fixed points).
-
-
-@dataclass
-class RaceOptions:
-    """How several arms share one RANSAC run.
-
-    Attributes:
-        add_after: total samples after which arm i+1 joins (arm 0 starts alone); arms beyond
-            the list join when the previous entry times ``add_growth`` has been spent.
-        drop_ratio: an arm whose best inlier count is below ``drop_ratio`` times the leader's...
-        drop_alpha: ...after enough samples that a good arm would have found an all-inlier
-            sample with probability ``1 - drop_alpha`` is dropped.
-        pool_rule: which arms' samples count toward the pooled F(k, r) stop besides the
-            leader's (the arm holding the best model): ``"support"``, arms whose best inlier
-            count is at least ``pool_ratio`` times the best model's; ``"model"``, arms whose
-            lowest-cost model has at least ``pool_ratio`` of the best model's inliers among its
-            own inliers (needs the problems' ``inliers``; else ``"support"``).
-        pool_ratio: the share of that rule.
-    """
-
-    add_after: tuple[int, ...] = (40,)
-    add_growth: float = 2.0
-    drop_ratio: float = 0.8
-    drop_alpha: float = 0.1
-    pool_rule: str = "support"
-    pool_ratio: float = 0.8
+__all__ = ["Budget", "RansacResult", "run_ransac"]
 
 
 @dataclass
@@ -164,201 +56,6 @@ class RansacResult:
     converged: bool = False  #: adaptive stopping reached (False: stopped at max_samples)
     points_read: int = 0  #: points verified for minimal-sample models (SPRT / bail-out only)
     rejected: int = 0  #: minimal-sample models rejected by the SPRT
-
-
-@numba.njit(cache=True, nogil=True)
-def _floyd_samples(u: np.ndarray, P: int) -> np.ndarray:
-    """(b, k) distinct indices in [0, P) per row from (b, k) uniforms in [0, 1) (Floyd's method).
-
-    Row i is a uniformly random k-subset of range(P): for j = P - k .. P - 1 take t uniform in
-    [0, j]; keep t unless already taken, else keep j.
-    """
-    b, k = u.shape
-    out = np.empty((b, k), dtype=np.int64)
-    for i in range(b):
-        for m in range(k):
-            j = P - k + m
-            t = min(int(u[i, m] * (j + 1)), j)
-            for q in range(m):
-                if out[i, q] == t:
-                    t = j
-                    break
-            out[i, m] = t
-    return out
-
-
-def draw_samples(rng: np.random.Generator, pool: np.ndarray, k: int, b: int) -> np.ndarray:
-    """(b, k) samples of k distinct entries of ``pool`` each, uniformly at random."""
-    P = pool.shape[0]
-    if P < k:
-        raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
-    return pool[_floyd_samples(rng.random((b, k)), P)]
-
-
-def prosac_schedule(P: int, k: int, growth: int) -> np.ndarray:
-    """PROSAC's T'_n for n = k .. P (Chum & Matas 2005), as an int64 array indexed n - k.
-
-    T_n = growth * C(n, k) / C(P, k) is the expected number, among ``growth`` uniform samples
-    of the whole pool, of samples drawn from the top n; T'_k = 1 and T'_{n+1} = T'_n +
-    ceil(T_{n+1} - T_n), so every n gets at least one sample. Sample t (1-based) with
-    T'_{n-1} < t <= T'_n is the n-th entry plus k - 1 drawn from the top n - 1.
-    """
-    if P < k:
-        raise ValueError(f"cannot draw {k} distinct points from a pool of {P}")
-    return _prosac_schedule_kernel(P, k, float(growth))
-
-
-@numba.njit(cache=True, nogil=True)
-def _prosac_schedule_kernel(P: int, k: int, growth: float) -> np.ndarray:
-    """:func:`prosac_schedule` for P >= k (compiled: it runs once per arm of every estimate)."""
-    T = growth
-    for i in range(k):
-        T *= (k - i) / (P - i)  # T_k
-    out = np.empty(P - k + 1, dtype=np.int64)
-    out[0] = 1
-    for n in range(k, P):
-        T_next = T * (n + 1) / (n + 1 - k)
-        out[n - k + 1] = out[n - k] + max(1, int(np.ceil(T_next - T)))
-        T = T_next
-    return out
-
-
-@numba.njit(cache=True, nogil=True)
-def _prosac_samples(u: np.ndarray, t0: int, P: int, schedule: np.ndarray) -> np.ndarray:
-    """(b, k) PROSAC samples t0 + 1 .. t0 + b (positions in the quality-ordered pool) from
-    (b, k) uniforms; uniform over range(P) (Floyd) once t exceeds the schedule's last T'_P."""
-    b, k = u.shape
-    out = np.empty((b, k), dtype=np.int64)
-    n = k
-    last = schedule.shape[0] - 1
-    for i in range(b):
-        t = t0 + i + 1
-        while n - k < last and schedule[n - k] < t:
-            n += 1
-        if schedule[n - k] < t:  # past the schedule: plain RANSAC over the whole pool
-            top, forced = P, -1
-        else:
-            top, forced = n - 1, n - 1
-        first = 0
-        if forced >= 0:
-            out[i, 0] = forced
-            first = 1
-        kk = k - first
-        for m in range(kk):  # Floyd: a uniform kk-subset of range(top)
-            j = top - kk + m
-            v = min(int(u[i, m] * (j + 1)), j)
-            for q in range(first, first + m):
-                if out[i, q] == v:
-                    v = j
-                    break
-            out[i, first + m] = v
-    return out
-
-
-class ProsacSampler:
-    """PROSAC over a pool ordered best first: deterministic given the generator's state.
-
-    Args:
-        pool: (P,) indices, best first.
-        k: sample size.
-        growth: T_N, the number of samples after which PROSAC has grown to the whole pool and
-            sampling is uniform (plain RANSAC).
-    """
-
-    def __init__(self, pool: np.ndarray, k: int, growth: int) -> None:
-        self.pool, self.k = pool, k
-        self.schedule = prosac_schedule(len(pool), k, growth)
-        self.t = 0  #: samples drawn so far
-
-    def top(self, t: int) -> int:
-        """Size of the top of the pool that sample t (1-based) is drawn from."""
-        n = int(np.searchsorted(self.schedule, t)) + self.k
-        return min(n, len(self.pool))
-
-    def draw(self, rng: np.random.Generator, b: int) -> np.ndarray:
-        """(b, k) next samples (entries of the pool)."""
-        idx = _prosac_samples(rng.random((b, self.k)), self.t, len(self.pool), self.schedule)
-        self.t += b
-        return self.pool[idx]
-
-
-@dataclass
-class SamplingOptions:
-    """Sampling and verification variants of :func:`run_ransac` (all off: plain RANSAC).
-
-    Attributes:
-        prosac: PROSAC sampling of each arm's pool in its order (best first); the adaptive
-            stopping is still F(k, r) over all samples drawn (see docs in run_ransac).
-        prosac_growth: T_N of the PROSAC schedule; 0 means ``max_samples``.
-        sprt: Wald's SPRT on minimal-sample models (Matas & Chum 2008), with epsilon the best
-            model's inlier ratio and delta the inlier ratio seen in rejected models.
-        bailout: reject a minimal-sample model as soon as it can neither beat its arm's best
-            cost nor reach the support that would earn it a local optimisation (exact).
-        sprt_model_time: t_M, the time to draw and solve one sample in units of one point's
-            verification, in the SPRT's threshold A.
-        sprt_delta: initial delta (probability that a point is consistent with a bad model).
-    """
-
-    prosac: bool = False
-    prosac_growth: int = 0
-    sprt: bool = False
-    bailout: bool = False
-    sprt_model_time: float = 200.0
-    sprt_delta: float = 0.01
-
-
-def sprt_threshold(epsilon: float, delta: float, model_time: float, models_per_sample: float):
-    """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
-    A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
-    C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)
-    A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0
-    A = A0
-    for _ in range(20):
-        A = A0 + np.log(A)
-    return float(A)
-
-
-class _Sprt:
-    """Adaptive SPRT / bail-out state of one run (shared by the arms: they score the same
-    points). Keeps epsilon (best model's inlier ratio), delta (inliers per point read in
-    SPRT-rejected models) and the threshold A; counts points read."""
-
-    def __init__(self, options: SamplingOptions, n: int) -> None:
-        self.opt = options
-        # a fixed pseudo-random reading order: the points come best first, and reading them in
-        # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
-        # the bail-out alone reproduces the plain run exactly
-        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
-        self.delta = options.sprt_delta
-        self.epsilon = 0.0
-        self.A = np.inf
-        self.rej_inliers = 0
-        self.rej_read = 0
-        self.models = 0
-        self.samples = 0
-        self.points_read = 0  #: points verified by minimal-sample scoring (all models)
-        self.rejected = 0  #: models rejected by the SPRT
-
-    def update(self, best_count: int, n: int) -> None:
-        """New epsilon / delta: recompute A (SPRT off while epsilon <= 1.5 delta)."""
-        if not self.opt.sprt:
-            return
-        eps = min(best_count / n, 0.999) if n else 0.0
-        if self.rej_read >= 50:  # enough evidence to replace the initial delta
-            self.delta = min(0.5, max(1e-4, self.rej_inliers / self.rej_read))
-        self.epsilon = eps
-        if eps <= 1.5 * self.delta:
-            self.A = np.inf
-        else:
-            ms = self.models / self.samples if self.samples else 1.0
-            self.A = sprt_threshold(eps, self.delta, self.opt.sprt_model_time, ms)
-
-    def logs(self) -> tuple[float, float, float]:
-        """(log A, log(delta / eps), log((1 - delta) / (1 - eps))) for the kernel."""
-        if not np.isfinite(self.A):
-            return np.inf, 0.0, 0.0
-        d, e = self.delta, self.epsilon
-        return float(np.log(self.A)), float(np.log(d / e)), float(np.log((1 - d) / (1 - e)))
 
 
 @dataclass
@@ -399,7 +96,7 @@ class _Run:
     ) -> None:
         self.source = iter(arms)
         self.sampling = sampling
-        self.sprt: _Sprt | None = None  # made when the first arm joins (it knows n)
+        self.sprt: Sprt | None = None  # made when the first arm joins (it knows n)
         self.rng, self.confidence, self.race, self.batch = rng, confidence, race, batch
         self.max_samples, self.min_samples = max_samples, min_samples
         self.budget = budget
@@ -431,7 +128,7 @@ class _Run:
             growth = opt.prosac_growth or self.max_samples
             arm.sampler = ProsacSampler(problem.pool, problem.sample_size, growth)
         if (opt.sprt or opt.bailout) and self.sprt is None:
-            self.sprt = _Sprt(opt, problem.n)
+            self.sprt = Sprt(opt, problem.n)
         self.arms.append(arm)
         self.active.append(len(self.arms) - 1)
         return True

@@ -101,3 +101,15 @@ def test_ledger_one_row_per_bag_and_resume(tmp_path):
     assert not forced.done("/bags/a", "k1") and forced.pairs() == []
     with (out / BAGS_CSV).open() as f:
         assert list(csv.DictReader(f)) == []
+
+
+def test_every_fleet_module_imports_without_ros():
+    """The fleet's parts run on any Python (the driver's machine needs no ROS to plan or
+    report); the bag side is sepfm_ros.ros.audit_adapter."""
+    from test_stream_no_ros import import_without_ros
+
+    r = import_without_ros("sepfm_ros.fleet")
+    assert r.returncode == 0, r.stdout + r.stderr
+    imported = set(r.stdout.split())
+    expected = {"discovery", "engine", "ledger", "records", "report", "rigs", "slices"}
+    assert {f"sepfm_ros.fleet.{m}" for m in expected} <= imported

@@ -127,7 +127,8 @@ def _pairs() -> list[tuple]:
     return out
 
 
-def run_rigs(n: int, seconds: float, rate: float, env: dict) -> None:
+def run_rigs(n: int, seconds: float, rate: float, env: dict) -> float:
+    """Run ``n`` rigs and print their row; returns the nodes' mean CPU ms per answered pair."""
     rigs = [f"rig{k}" for k in range(n)]
     procs = [
         subprocess.Popen(
@@ -180,6 +181,7 @@ def run_rigs(n: int, seconds: float, rate: float, env: dict) -> None:
             f"{os.getloadavg()[0]:.1f} |",
             flush=True,
         )
+        return float(np.mean(per_pair))
     finally:
         feeder.close()
         for p in procs:
@@ -216,8 +218,17 @@ def main(argv: list[str] | None = None) -> int:
             "node CPU per answered pair (ms) | CPU used by the nodes | load average |"
         )
         print("|---:|---:|---:|---:|---:|---:|---:|")
-        for n in a.rigs:
-            run_rigs(n, a.seconds, a.rate, env)
+        costs = [run_rigs(n, a.seconds, a.rate, env) for n in a.rigs]
+        cost = float(np.median(costs))
+        share = cost * a.rate / 1e3
+        print(
+            f"\nEach rig costs its node about {cost:.0f} ms of CPU per pair (median over the "
+            f"rows), {100 * share:.0f} % of a core at {a.rate:g} Hz: this host's "
+            f"{os.cpu_count()} cores would answer about {int(os.cpu_count() / share)} rigs "
+            "completely if the nodes had them to themselves; the rows above show what they "
+            "answered while sharing the cores with the publisher and other work (load average "
+            "column)."
+        )
         print(
             "\nA rig is answered completely while the nodes' CPU per pair times the pair rate "
             "of all rigs stays under the cores left by the drivers; past that each node drops "

@@ -116,8 +116,10 @@ def plot_rig(rig: RigSummary, path: Path, thresholds: Thresholds) -> None:
     for r in rig.rows:
         if r.get("start_utc"):
             ax.axvline(datetime.fromisoformat(r["start_utc"]), color="0.7", ls=":", lw=1)
+        if r.get("drift_start_utc"):
+            ax.axvline(datetime.fromisoformat(r["drift_start_utc"]), color="red", lw=1)
     ax.set_title(f"{rig.name}: {rig.worst or 'no calibration check'}")
-    ax.set_xlabel("time (UTC); dotted: a bag starts")
+    ax.set_xlabel("time (UTC); dotted: a bag starts; red: the drift starts")
     ax.legend(fontsize=7, loc="upper left")
     fig.autofmt_xdate()
     fig.tight_layout()

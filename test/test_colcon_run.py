@@ -1,9 +1,11 @@
 """The ``ros2 run sepfm_ros node`` contract, without ros2cli (not on PyPI).
 
-``colcon build`` (colcon-core + colcon-ros from PyPI) builds the package into a temporary
-workspace; the package prefix is looked up with ament_index_python exactly as ``ros2 run`` does,
-and ``<prefix>/lib/sepfm_ros/node`` is run from there (with the installed config file) until it
-publishes its /diagnostics report.
+``colcon build`` (colcon-core + colcon-ros from PyPI) builds both packages of the repository,
+sepfm_msgs (ament_cmake, against this environment's ROS wheels) and sepfm_ros, into a temporary
+workspace; colcon stops at the root package.xml, so the nested interface package is named with
+``--base-paths`` as README's workspace command does. The package prefix is looked up with
+ament_index_python exactly as ``ros2 run`` does, and ``<prefix>/lib/sepfm_ros/node`` is run from
+there (with the installed config file) until it publishes its /diagnostics report.
 """
 
 from __future__ import annotations
@@ -34,10 +36,14 @@ def colcon_install(tmp_path_factory) -> Path:
     if not colcon:
         missing_tool("colcon", "pip install colcon-core colcon-ros, or pip install -e '.[test]'")
     ws = tmp_path_factory.mktemp("colcon_ws")
-    cmd = [str(colcon), "--log-base", str(ws / "log"), "build", "--base-paths", str(REPO)]
+    cmd = [str(colcon), "--log-base", str(ws / "log"), "build"]
+    cmd += ["--base-paths", str(REPO), str(REPO / "sepfm_msgs")]
     cmd += ["--build-base", str(ws / "build"), "--install-base", str(ws / "install")]
-    done = subprocess.run(cmd, cwd=ws, capture_output=True, text=True, timeout=300)
+    # the interpreter whose ROS wheels sepfm_msgs builds against (a ROS machine's is found)
+    cmd += ["--cmake-args", f"-DPython3_EXECUTABLE={sys.executable}"]
+    done = subprocess.run(cmd, cwd=ws, capture_output=True, text=True, timeout=900)
     assert done.returncode == 0, done.stdout + done.stderr
+    assert "Finished <<< sepfm_msgs" in done.stdout, done.stdout
     assert "Finished <<< sepfm_ros" in done.stdout, done.stdout
     return ws / "install"
 
@@ -70,6 +76,33 @@ def test_colcon_build_installs_executables_and_share_files(colcon_install):
     assert (colcon_install.parent / "install").is_dir()
     index = prefix / "share" / "ament_index" / "resource_index" / "packages" / "sepfm_ros"
     assert index.is_file()
+
+
+def test_colcon_built_interface_package_serialises_its_messages(colcon_install, tmp_path):
+    # what sourcing install/setup.sh gives sepfm_msgs: its site-packages and its libraries first
+    prefix = colcon_install / "sepfm_msgs"
+    site = prefix / Path(sysconfig.get_path("purelib", vars={"base": str(prefix)})).relative_to(
+        prefix
+    )
+    assert (prefix / "share" / "sepfm_msgs" / "msg" / "TwoViewEstimate.msg").is_file()
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(site), *filter(None, [env.get("PYTHONPATH")])])
+    env["LD_LIBRARY_PATH"] = os.pathsep.join(
+        [str(prefix / "lib"), *filter(None, [env.get("LD_LIBRARY_PATH")])]
+    )
+    code = (
+        "import sepfm_msgs; from sepfm_msgs.msg import TwoViewEstimate as T;"
+        "from rclpy.serialization import serialize_message as s, deserialize_message as d;"
+        "m = d(s(T(status_text='built by colcon', inliers=7)), T);"
+        "print(sepfm_msgs.__file__); print(m.status_text, m.inliers, T.STATUS_BAD_INPUT)"
+    )
+    r = subprocess.run(
+        [sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True
+    )
+    assert r.returncode == 0, r.stderr
+    module_file, values = r.stdout.splitlines()
+    assert Path(module_file).is_relative_to(prefix), module_file  # colcon's, not pip's copy
+    assert values == "built by colcon 7 5"
 
 
 def test_ros2_run_warm_up_caches_kernels_inside_the_install(colcon_install, tmp_path):

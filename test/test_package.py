@@ -87,6 +87,11 @@ JAZZY_PACKAGES = {
     "launch",
     "launch_ros",
 }
+# Packages of this repository's workspace (``rosdep install --from-paths`` names their folders,
+# README): rosdep resolves them from the workspace, not from rosdistro.
+WORKSPACE_PACKAGES = {"sepfm_msgs": REPO_ROOT / "sepfm_msgs"}
+# Core Jazzy packages (ros2/ament_cmake, ros2/rosidl_defaults) that build an interface package.
+JAZZY_INTERFACE_BUILD = {"ament_cmake", "rosidl_default_generators", "rosidl_default_runtime"}
 # Keys of ros/rosdistro rosdep/python.yaml, each read there with an Ubuntu rule that covers
 # Jazzy's 24.04 (a plain package list, no per-release list that leaves it out).
 ROSDISTRO_KEYS = {
@@ -119,18 +124,29 @@ MODULE_KEYS = {
     "dask": "python3-distributed-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
-    **{name: name for name in JAZZY_PACKAGES},
+    **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},
 }
 # Imported only where present; the code and tests say so when it is missing.
 OPTIONAL_MODULES = {"poselib"}
 
 
-def _package_xml() -> dict[str, set[str]]:
+def _package_xml(folder: Path = REPO_ROOT) -> dict[str, set[str]]:
+    """Dependency kind -> keys of ``folder/package.xml``; also its "name", "format",
+    "build_type" and "member_of_group"."""
     import xml.etree.ElementTree as ET
 
-    root = ET.parse(REPO_ROOT / "package.xml").getroot()
+    root = ET.parse(folder / "package.xml").getroot()
     kinds = ("depend", "exec_depend", "test_depend", "build_depend", "build_export_depend")
-    return {kind: {e.text.strip() for e in root.findall(kind)} for kind in kinds}
+    kinds += ("buildtool_depend", "name", "member_of_group", "export/build_type")
+    found = {kind: {e.text.strip() for e in root.findall(kind)} for kind in kinds}
+    found["format"] = {root.get("format", "")}
+    return found
+
+
+def _dependency_keys(folder: Path = REPO_ROOT) -> set[str]:
+    deps = _package_xml(folder)
+    kinds = ("depend", "exec_depend", "test_depend", "build_depend", "build_export_depend")
+    return set().union(*(deps[kind] | deps["buildtool_depend"] for kind in kinds))
 
 
 def _rosdep_yaml() -> dict:
@@ -160,17 +176,55 @@ def _imported_modules(paths: list[Path], local: set[str]) -> set[str]:
 
 
 def test_every_package_xml_key_resolves_on_jazzy():
-    deps = _package_xml()
     own = set(_rosdep_yaml())
-    used = set().union(*deps.values())
-    unknown = used - JAZZY_PACKAGES - ROSDISTRO_KEYS - own
+    used = _dependency_keys()
+    unknown = used - JAZZY_PACKAGES - ROSDISTRO_KEYS - own - set(WORKSPACE_PACKAGES)
     assert not unknown, f"keys neither Jazzy packages nor verified rosdep keys: {unknown}"
     assert not used & ROSDISTRO_KEYS_NOT_ON_NOBLE
+    for key, folder in WORKSPACE_PACKAGES.items():
+        assert _package_xml(folder)["name"] == {key}, f"{folder}/package.xml is not {key}"
+
+
+def test_interface_package_is_a_rosidl_package_of_jazzy_keys():
+    folder = WORKSPACE_PACKAGES["sepfm_msgs"]
+    xml = _package_xml(folder)
+    assert xml["format"] == {"3"}
+    assert xml["export/build_type"] == {"ament_cmake"}
+    assert xml["member_of_group"] == {"rosidl_interface_packages"}
+    assert {"ament_cmake", "rosidl_default_generators"} <= xml["buildtool_depend"]
+    unknown = _dependency_keys(folder) - JAZZY_PACKAGES - JAZZY_INTERFACE_BUILD
+    assert not unknown, f"sepfm_msgs keys that are no core Jazzy packages: {unknown}"
+
+
+def _requirement_name(spec: str) -> str:
+    return spec.split("[")[0].split("=")[0].split(">")[0].split("<")[0].strip()
+
+
+def test_interface_package_builds_from_jazzy_wheels_only():
+    import ast
+
+    tomllib = pytest.importorskip("tomllib", reason="reads pyproject.toml with Python 3.11+")
+
+    pyproject = tomllib.loads((WORKSPACE_PACKAGES["sepfm_msgs"] / "pyproject.toml").read_text())
+    build = pyproject["build-system"]["requires"]
+    runtime = pyproject["project"]["dependencies"]
+    for spec in build + runtime:
+        name = _requirement_name(spec)
+        if name.startswith("ros-"):  # never a non-Jazzy ros-* wheel, and pinned to one release
+            assert name.startswith("ros-jazzy-") and "==" in spec, spec
+    # setup.py's test extra gives colcon the same build packages (test_colcon_run)
+    tree = ast.parse((REPO_ROOT / "setup.py").read_text())
+    in_setup = next(
+        ast.literal_eval(node.value)
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "SEPFM_MSGS_BUILD"
+    )
+    assert set(in_setup) == {s for s in build if s.startswith("ros-jazzy-")}
 
 
 def test_rosdep_yaml_defines_only_missing_keys_for_ubuntu_and_debian():
     rules = _rosdep_yaml()
-    used = set().union(*_package_xml().values())
+    used = _dependency_keys()
     for key, rule in rules.items():
         assert key in used, f"{key} is defined in rosdep.yaml but not used in package.xml"
         assert key not in ROSDISTRO_KEYS | ROSDISTRO_KEYS_NOT_ON_NOBLE | JAZZY_PACKAGES, key

@@ -26,7 +26,7 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import detect_inputs
+from sepfm_ros.ros.bags.inputs import detect_inputs, no_pairs_reason
 from sepfm_ros.ros.bags.reader import BAG_SUFFIXES, BagReader
 from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
@@ -55,14 +55,6 @@ def find_bags(path: Path) -> list[Path]:
     if path.is_dir():
         return sorted(p for p in path.iterdir() if is_bag(p))
     return []
-
-
-def _size(text: str) -> tuple[int, int] | None:
-    try:
-        w, h = (int(v) for v in text.split("x"))
-    except (AttributeError, ValueError):
-        return None
-    return (w, h) if w > 0 and h > 0 else None
 
 
 def _input_bag_pairs(
@@ -95,6 +87,11 @@ def _input_bag_pairs(
             errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
             continue
         pairs.append(PairSpec(pid, bag.name, F, img_a=paths[0], img_b=paths[1], kind=spec.mode))
+    if not pairs and not errors:
+        frames = {t: len(v) for t, v in inputs.stamps.items()}
+        gap = int(params["frame_gap"])
+        why = no_pairs_reason(spec, frames, gap, slop_ns, None)
+        errors.append(PairError(bag.name, bag.name, f"bag {bag}: {why}"))
     return pairs, errors
 
 
@@ -103,12 +100,14 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
     for fr in read_results(bag):
         pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}{fr.run_label}"
         pts_a, pts_b = fr.pts()
-        size_a, size_b = _size(fr.info.get("size_a", "")), _size(fr.info.get("size_b", ""))
+        est = fr.estimate
+        size_a = (int(est.width_a), int(est.height_a)) if est is not None else (0, 0)
+        size_b = (int(est.width_b), int(est.height_b)) if est is not None else (0, 0)
         try:
             if fr.F_gt is None:
                 raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with this stamp")
-            if size_a is None:
-                raise PairDataError("no image size in the estimate info")
+            if min(size_a) <= 0 or min(size_b) <= 0:
+                raise PairDataError("no image size in the estimate (a failure record?)")
             F = parse_fundamental(fr.F_gt)
         except PairDataError as exc:
             errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
@@ -121,7 +120,7 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
                 pts_a=np.ascontiguousarray(pts_a),
                 pts_b=np.ascontiguousarray(pts_b),
                 size_a=size_a,
-                size_b=size_b or size_a,
+                size_b=size_b,
                 kind="processed",
             )
         )

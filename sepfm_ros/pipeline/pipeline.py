@@ -31,10 +31,8 @@ from collections import OrderedDict
 from collections.abc import Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from functools import cache
 from typing import Any
 
-import cv2
 import numpy as np
 
 from sepfm_ros.geometry import (
@@ -47,7 +45,14 @@ from sepfm_ros.geometry import (
     symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.calibrated.camera import CameraModel, undistort_points
-from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
+from sepfm_ros.pipeline.features import (
+    FEATURES,
+    Matches,
+    detect,
+    make_detector,
+    match_descriptors,
+    unavailable_reason,
+)
 
 # The fewest matches any estimator method accepts (eight-point needs 8).
 MIN_MATCHES = 8
@@ -93,8 +98,8 @@ def config_errors(config: PipelineConfig) -> list[str]:
     errors = []
     if config.features not in FEATURES:
         errors.append(f"features must be one of {FEATURES}, got {config.features!r}")
-    elif not detector_available(config.features):
-        errors.append(f"features {config.features!r} are not available in this OpenCV build")
+    elif (reason := unavailable_reason(config.features)) is not None:
+        errors.append(reason)
     if config.method not in METHODS:
         errors.append(f"method must be one of {METHODS}, got {config.method!r}")
     if not int(config.max_features) >= MIN_MATCHES:
@@ -110,16 +115,6 @@ def config_errors(config: PipelineConfig) -> list[str]:
     if int(config.max_matches) < 0:
         errors.append(f"max_matches must be >= 0, got {config.max_matches}")
     return errors
-
-
-@cache
-def detector_available(features: str) -> bool:
-    """True when this OpenCV build can create the ``features`` detector."""
-    try:
-        make_detector(features, 100)
-    except (AttributeError, ValueError, cv2.error):
-        return False
-    return True
 
 
 @dataclass

@@ -5,7 +5,6 @@
   the reason).
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
-- :func:`pose_values`: the same pose as ``~/estimate_info`` key/values.
 - :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``.
 """
 
@@ -13,7 +12,6 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 from scipy.spatial.transform import Rotation
@@ -73,29 +71,6 @@ def relative_transform(
             rotation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
         ),
     )
-
-
-def pose_values(pose: RelativePose, coordinates: str, scaled: bool) -> dict[str, Any]:
-    """Key/values of a relative pose for ``~/estimate_info``.
-
-    Keys: ``coordinates`` (pixels F uses: "image" or "undistorted"), ``pose_status``,
-    ``rotation_deg``, ``translation_direction`` ("x y z" of b's position in a's frame, unit),
-    ``translation_scale`` ("baseline_m" or "unit"), ``baseline_m`` when scaled,
-    ``inliers_in_front``.
-    """
-    values: dict[str, Any] = {"coordinates": coordinates, "pose_status": pose.status}
-    if not pose.ok:
-        return values
-    _, p_ba = pose_of_b_in_a(pose.R, pose.t)
-    n = float(np.linalg.norm(p_ba))
-    direction = p_ba / n if n > 0 else p_ba
-    values["rotation_deg"] = pose.rotation_deg
-    values["translation_direction"] = " ".join(f"{v:.6f}" for v in direction)
-    values["translation_scale"] = "baseline_m" if scaled else "unit"
-    if scaled:
-        values["baseline_m"] = n
-    values["inliers_in_front"] = pose.in_front
-    return values
 
 
 def calibration_status(

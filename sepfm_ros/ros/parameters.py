@@ -82,7 +82,12 @@ PARAMS: dict[str, ParamSpec] = {
         1e6,
     ),
     "frame_gap": ParamSpec(1, "motion: F between frame t - frame_gap and frame t", 1, 100),
-    "features": ParamSpec("orb", "feature detector/descriptor", choices=FEATURES),
+    "features": ParamSpec(
+        "orb",
+        "feature detector/descriptor (akaze where this OpenCV has it: OpenCV 4, or OpenCV 5's "
+        "contrib wheel)",
+        choices=FEATURES,
+    ),
     "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
     "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
     "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
@@ -107,7 +112,7 @@ PARAMS: dict[str, ParamSpec] = {
     "publish_unreliable": ParamSpec(
         True,
         "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
-        " plane); ~/estimate_info then carries the reason at WARN level",
+        " plane); ~/estimate's status then says why",
     ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
     "use_camera_info": ParamSpec(

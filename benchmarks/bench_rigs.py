@@ -6,7 +6,7 @@ For each rig count N, N node processes are started exactly as the launch file st
 ``sepfm`` in namespace ``/rigK``, stereo mode, default parameters, inputs
 ``/rigK/left/image_raw`` and ``/rigK/right/image_raw``); this process publishes KITTI's mono8
 stereo pairs (1241x376) to every rig at ``--rate`` Hz for ``--seconds`` after each node has
-answered three pairs, and counts each rig's answers on ``/rigK/sepfm/estimate_info``. Printed per
+answered three pairs, and counts each rig's answers on ``/rigK/sepfm/estimate``. Printed per
 N: the share of pairs answered (worst rig and all rigs), the nodes' latency p50/p95, each node's
 CPU time per answered pair and the host's CPU used by the nodes. The publisher shares the
 machine (its cost is part of what a robot's drivers cost).
@@ -38,10 +38,11 @@ class RigFeeder:
 
     def __init__(self, rigs: list[str]) -> None:
         import rclpy
-        from diagnostic_msgs.msg import DiagnosticArray
         from rclpy.executors import SingleThreadedExecutor
         from rclpy.qos import QoSProfile, ReliabilityPolicy
         from sensor_msgs.msg import Image
+
+        from sepfm_msgs.msg import TwoViewEstimate
 
         self.rclpy = rclpy
         self.context = rclpy.Context()
@@ -59,8 +60,8 @@ class RigFeeder:
         self.answers: dict[str, dict[int, float]] = {rig: {} for rig in rigs}
         for rig in rigs:
             self.node.create_subscription(
-                DiagnosticArray,
-                f"/{rig}/sepfm/estimate_info",
+                TwoViewEstimate,
+                f"/{rig}/sepfm/estimate",
                 lambda msg, rig=rig: self._on_info(rig, msg),
                 qos,
             )
@@ -79,9 +80,9 @@ class RigFeeder:
 
     def _on_info(self, rig: str, msg) -> None:
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-        values = {kv.key: kv.value for kv in msg.status[0].values}
+        latency = next((t.ms for t in msg.timings if t.stage == "latency"), float("nan"))
         with self.lock:
-            self.answers[rig][stamp] = float(values.get("ms_latency", "nan"))
+            self.answers[rig][stamp] = float(latency)
 
     def wait_connected(self, timeout: float = 300.0) -> None:
         deadline = time.monotonic() + timeout

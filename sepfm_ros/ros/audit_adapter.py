@@ -3,10 +3,10 @@ through the node's answer path (:func:`audit_slice`). Both run on the engine's w
 return plain data (:mod:`sepfm_ros.fleet.records`), or a :class:`TaskFailure` saying why the bag
 cannot be audited: a bad bag is a row with its reason, never a crashed run.
 
-Each pair is answered by ``process``'s :func:`~sepfm_ros.ros.process.process_pair` (the node's
-outputs for the pair, with the calibration check's sliding window when the bag has calibrated
-stereo), and :func:`pair_record` reads the audit's figures from those messages: the audit's
-judgement is the node's, not a copy of it.
+Each pair is answered by the node's one answer path
+(:func:`~sepfm_ros.ros.answer.answer_pair`, with the calibration check's sliding window when the
+bag has calibrated stereo), and :func:`pair_record` reads the audit's figures from that typed
+answer: the audit's judgement is the node's, not a copy of it.
 """
 
 from __future__ import annotations
@@ -18,9 +18,6 @@ from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import PointCloud2
 
 from sepfm_ros.fleet.records import (
     BagInfo,
@@ -33,26 +30,31 @@ from sepfm_ros.fleet.records import (
 )
 from sepfm_ros.fleet.slices import warm_pairs
 from sepfm_ros.pipeline.pipeline import Pipeline
+from sepfm_ros.ros.answer import (
+    AnswerSettings,
+    PairAnswer,
+    PairCalibration,
+    answer_pair,
+    decode_pair,
+)
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.types import CAMERA_INFO, header_stamp_ns
 from sepfm_ros.ros.calibrated import CalibratedStream
-from sepfm_ros.ros.messages import matches_from_pointcloud2, stamp_ns, status_values
+from sepfm_ros.ros.messages import stamp_ns, status_values
 from sepfm_ros.ros.parameters import monitor_config, pipeline_config
 from sepfm_ros.ros.process import (
     PairJob,
     expected_pairs,
     iter_pairs,
     pairing_slop_ns,
-    process_pair,
     read_camera_infos,
 )
-from sepfm_ros.ros.results import OUTPUT_NAMESPACE, calibrated_topics, output_topics
+from sepfm_ros.ros.results import OUTPUT_NAMESPACE
 
 # header stamps of the first camera read to find its frame period and the stereo slop
 PERIOD_SAMPLE = 201
-TOPICS = {**output_topics(), **calibrated_topics()}
 LEVELS = {0: "OK", 1: "WARN", 2: "ERROR", 3: "STALE"}
 
 
@@ -155,42 +157,29 @@ class _From:
         return self.reader.messages(topics, start)
 
 
-def _median_or_nan(values: np.ndarray) -> float:
-    return float(np.median(values)) if values.size else math.nan
-
-
-def pair_record(job: PairJob, outputs: list[tuple[str, bytes]]) -> PairRecord:
-    """The audit's figures of one pair from the node's outputs for it (topic, CDR bytes)."""
-    by_topic = dict(outputs)
-    stamp = stamp_ns(job.header.stamp)
-    if TOPICS["estimate_info"] not in by_topic:
-        return PairRecord(stamp, job.log_time_ns, "skipped: bad input", False, 0, 0)
-    info = deserialize_message(by_topic[TOPICS["estimate_info"]], DiagnosticArray)
-    values = status_values(info.status[0])
-    inlier_error = math.nan
-    has_f = TOPICS["fundamental"] in by_topic
-    if has_f and TOPICS["matches"] in by_topic:
-        cloud = matches_from_pointcloud2(
-            deserialize_message(by_topic[TOPICS["matches"]], PointCloud2)
-        )
-        inlier_error = _median_or_nan(cloud["error"][cloud["inlier"].astype(bool)])
+def pair_record(job: PairJob, answer: PairAnswer) -> PairRecord:
+    """The audit's figures of one pair, read from the node's answer for it."""
+    est = answer.estimate
+    check = answer.calibrated.check if answer.calibrated is not None else None
+    rotation = epipolar = math.nan
+    if check is not None and check.usable:
+        rotation, epipolar = check.rotation_error_deg, check.epipolar_median_px
     level, window_rot, window_x = "", math.nan, math.nan
-    if TOPICS["calibration_check"] in by_topic:
-        check = deserialize_message(by_topic[TOPICS["calibration_check"]], DiagnosticStatus)
-        level = LEVELS.get(int.from_bytes(check.level, "little"), "ERROR")
-        cv = status_values(check)
-        window_rot = float(cv.get("rotation_error_deg", "nan"))
-        window_x = float(cv.get("rotation_x_deg", "nan"))
+    if answer.calibration is not None:
+        level = LEVELS.get(int.from_bytes(answer.calibration.level, "little"), "ERROR")
+        values = status_values(answer.calibration)
+        window_rot = float(values.get("rotation_error_deg", "nan"))
+        window_x = float(values.get("rotation_x_deg", "nan"))
     return PairRecord(
-        stamp,
+        stamp_ns(job.header.stamp),
         job.log_time_ns,
-        values.get("status", ""),
-        has_f,
-        int(values.get("matches", 0)),
-        int(values.get("inliers", 0)),
-        inlier_error,
-        float(values.get("calibration_rotation_error_deg", "nan")),
-        float(values.get("calibration_epipolar_median_px", "nan")),
+        est.status_text,
+        answer.has_f,
+        int(est.matches),
+        int(est.inliers),
+        float(est.inlier_error_px) if answer.has_f else math.nan,
+        float(rotation),
+        float(epipolar),
         window_rot,
         window_x,
         level,
@@ -201,8 +190,8 @@ class _Answerer:
     """The node's answer path over one bag's pairs (pipeline, calibration and its window)."""
 
     def __init__(self, reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> None:
-        self.params = params
         self.pipeline = Pipeline(pipeline_config(params), cache_size=8)
+        self.settings = AnswerSettings.of(self.pipeline.config, params["publish_unreliable"])
         self.infos = read_camera_infos(reader, spec) if params["use_camera_info"] else None
         self.calibrated = None
         if self.infos is not None:
@@ -214,10 +203,17 @@ class _Answerer:
             )
 
     def answer(self, job: PairJob) -> PairRecord:
-        calib = None
+        """The pair's answer (:func:`~sepfm_ros.ros.answer.answer_pair`, as the node's)."""
+        calibration = None
         if self.calibrated is not None and self.infos is not None:
-            calib = (self.calibrated, self.infos.at(stamp_ns(job.header.stamp)))
-        return pair_record(job, process_pair(self.pipeline, job, self.params, TOPICS, calib))
+            infos = self.infos.at(stamp_ns(job.header.stamp))
+            calibration = PairCalibration(self.calibrated, infos)
+        decoded = decode_pair(job.msg_a, job.msg_b, job.stereo)
+        answer = answer_pair(
+            self.pipeline, job.headers(), decoded, self.settings, (job.key_a, job.key_b),
+            calibration,
+        )  # fmt: skip
+        return pair_record(job, answer)
 
 
 def audit_slice(task: SliceTask) -> Any:

@@ -31,6 +31,7 @@ EXECUTABLES = [
     "warm_up",
     "calibration_check",
     "rectify",
+    "audit",
 ]
 # What building sepfm_msgs needs from PyPI: its pyproject.toml's ros-jazzy-* build requirements
 # (including those the ROS wheels need but do not declare).
@@ -106,6 +107,10 @@ setup(
             "ros-jazzy-common-interfaces",
         ],
         "poselib": ["poselib"],
+        # `sepfm_ros audit`: the fleet audit runs on Dask distributed (chosen over Ray:
+        # docs/design.md, figures in docs/benchmarks.md); psutil is distributed's own dependency.
+        # python3-distributed-pip in package.xml / rosdep.yaml.
+        "fleet": ["distributed>=2024.1"],
         "test": [
             "pytest>=7",
             "hypothesis>=6",
@@ -113,6 +118,7 @@ setup(
             "colcon-core",
             "colcon-ros",
             "poselib",
+            "distributed>=2024.1",  # the audit tests (the fleet extra)
             # colcon builds sepfm_msgs against this environment's ROS wheels (test_colcon_run):
             # the ros-jazzy-* build requirements of sepfm_msgs/pyproject.toml (test_package
             # checks that the two lists agree)

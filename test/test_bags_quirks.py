@@ -19,18 +19,15 @@ from robot_bags import (
     IMAGE_T,
     LEFT_TOPIC,
     RIGHT_TOPIC,
-    START_NS,
-    _header,
-    _image,
-    _typestore,
     bag_path,
     big_endian_mono16,
+    qoi_bytes,
     qoi_compressed,
     write_camera_bag,
     write_robot_bag,
+    write_stereo_without_right,
     zero_step_image,
 )
-from rosbags.rosbag2 import StoragePlugin, Writer
 from sensor_msgs.msg import CompressedImage, Image
 
 from sepfm_ros.evaluation.bags import load_bag_pairs
@@ -173,24 +170,6 @@ def test_an_output_named_as_another_format_is_refused_before_any_work(frames, tm
 
 
 # ----------------------------------------------------------------------------- one frame
-def _stereo_without_right(path: Path, left: np.ndarray, ground_truth: bool = False) -> Path:
-    """A rosbag2 stereo bag whose right topic was recorded but holds no message."""
-    ts = _typestore("mcap")
-    with Writer(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
-        conn_l = writer.add_connection(LEFT_TOPIC, IMAGE_T, typestore=ts)
-        writer.add_connection(RIGHT_TOPIC, IMAGE_T, typestore=ts)
-        header = _header(ts, "mcap", START_NS, "left", 0)
-        writer.write(conn_l, START_NS, bytes(ts.serialize_cdr(_image(ts, header, left), IMAGE_T)))
-        if ground_truth:
-            gt = writer.add_connection("/ground_truth/fundamental", IMAGE_T, typestore=ts)
-            F = np.frombuffer(np.eye(3).tobytes(), np.uint8)
-            msg = ts.types[IMAGE_T](
-                header=header, height=3, width=3, encoding="64FC1", is_bigendian=0, step=24, data=F
-            )
-            writer.write(gt, START_NS, bytes(ts.serialize_cdr(msg, IMAGE_T)))
-    return path
-
-
 def test_a_one_frame_bag_says_what_the_mode_needs_and_fails(frames, tmp_path):
     motion = write_camera_bag(tmp_path / "one_frame", [frames[0][0]])
     res = _cli("process", str(motion), "-o", str(tmp_path / "out_m"), "--quiet")
@@ -201,7 +180,7 @@ def test_a_one_frame_bag_says_what_the_mode_needs_and_fails(frames, tmp_path):
     res = _cli("process", str(motion), "-o", str(tmp_path / "o3"), "-p", "frame_gap:=3")
     assert res.returncode == 1 and "frame_gap + 1 = 4 frames" in res.stderr, res.stderr
 
-    stereo = _stereo_without_right(tmp_path / "no_right", frames[0][0])
+    stereo = write_stereo_without_right(tmp_path / "no_right", frames[0][0])
     res = _cli("process", str(stereo), "-o", str(tmp_path / "out_s"), "--quiet")
     assert res.returncode == 1 and "Traceback" not in res.stderr, res.stderr
     assert f"{LEFT_TOPIC} has 1 frame(s), {RIGHT_TOPIC} has 0 frame(s)" in res.stderr
@@ -210,7 +189,7 @@ def test_a_one_frame_bag_says_what_the_mode_needs_and_fails(frames, tmp_path):
 
 
 def test_eval_bags_names_a_bag_that_gives_no_pair(frames, tmp_path):
-    bag = _stereo_without_right(tmp_path / "no_right", frames[0][0], ground_truth=True)
+    bag = write_stereo_without_right(tmp_path / "no_right", frames[0][0], ground_truth=True)
     pairs, errors = load_bag_pairs(bag, tmp_path / "frames")
     assert pairs == [] and len(errors) == 1
     assert f"{RIGHT_TOPIC} has 0 frame(s)" in errors[0].message
@@ -237,8 +216,7 @@ def test_a_compressed_format_not_decoded_is_named(frames, tmp_path):
     for data, name in ((b"GIF89a" + bytes(64), "gif"), (b"RIFF\x00\x00\x00\x00WEBPVP8 ", "webp")):
         with pytest.raises(ImageDecodeError, match=f"are {name} data; jpeg, png and qoi"):
             check_compressed(CompressedImage(format=name, data=data))
-    qoi = qoi_compressed(_typestore("mcap"), None, frames[0][0])
-    cut = CompressedImage(format="qoi", data=bytes(qoi.data[:-20]))
+    cut = CompressedImage(format="qoi", data=qoi_bytes(frames[0][0])[:-20])
     with pytest.raises(ImageDecodeError, match="qoi data of .* no end marker") as err:
         check_compressed(cut)
     assert err.value.kind == "truncated_compressed"
@@ -260,16 +238,35 @@ def test_big_endian_16_bit_images_through_process(sequence, frames, tmp_path, ca
 # ----------------------------------------------------------------------------- exit codes
 def _padded_step_zero(ts, header, img: np.ndarray):
     """``step`` 0 on padded rows: the data length disagrees with packed rows (undecodable)."""
-    msg = _image(ts, header, np.pad(img, ((0, 0), (0, 8))))
-    msg.width, msg.step = img.shape[1], 0
+    msg = zero_step_image(ts, header, np.pad(img, ((0, 0), (0, 8))))
+    msg.width = img.shape[1]
     return msg
 
 
-def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+def test_process_names_frames_skipped_for_their_fields(frames, tmp_path):
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_padded_step_zero)
     res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
     assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
-    assert "step 0 is smaller than a row" in res.stderr  # the reason, per pair
+    assert "step 0 is smaller than a row" in res.stderr  # the reason
+    assert f"{LEFT_TOPIC} has 0 frame(s) ({N_FRAMES} more skipped: unusable fields)" in res.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def _all_nan(ts, header, img: np.ndarray):
+    """A 32FC1 image without one finite pixel: its fields pass, its pixels cannot be mapped."""
+    h, w = img.shape[:2]
+    data = np.full((h, w), np.nan, "<f4").tobytes()
+    return ts.types[IMAGE_T](
+        header=header, height=h, width=w, encoding="32FC1", is_bigendian=0, step=4 * w,
+        data=np.frombuffer(data, np.uint8),
+    )  # fmt: skip
+
+
+def test_process_exits_non_zero_when_no_pair_decodes(frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=_all_nan)
+    res = _cli("process", str(bag), "-o", str(tmp_path / "out"), "--quiet")
+    assert res.returncode == 1 and "Traceback" not in res.stderr, res.stdout + res.stderr
+    assert "has no finite pixel" in res.stderr  # the reason, per pair
     assert f"error: none of the {N_FRAMES} pairs could be decoded" in res.stderr
 
 
@@ -286,7 +283,7 @@ def test_record_exits_non_zero_when_nothing_was_recorded(tmp_path, ros_domain_id
 def test_eval_exits_non_zero_when_a_bag_gives_no_pair(sequence, frames, tmp_path):
     gt = [pair_fundamental(*f.cameras) for f in sequence]
     good = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, ground_truth=gt)
-    bad = _stereo_without_right(tmp_path / "no_right", frames[0][0], ground_truth=True)
+    bad = write_stereo_without_right(tmp_path / "no_right", frames[0][0], ground_truth=True)
     out = tmp_path / "eval"
     flags = ["--cache", "none", "--methods", "cv-ransac", "--seeds", "0", "--no-progress"]
     res = _cli("eval", "--bags", str(good), "--bags", str(bad), "--out", str(out), *flags)

@@ -130,6 +130,8 @@ MODULE_KEYS = {
     "numba": "python3-numba-pip",
     "llvmlite": "python3-numba-pip",
     "threadpoolctl": "python3-threadpoolctl",
+    "distributed": "python3-distributed-pip",
+    "dask": "python3-distributed-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
     **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},

@@ -47,7 +47,7 @@ from sepfm_ros.ros.answer import (
     precheck,
 )
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import detect_inputs, no_pairs_reason
+from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibrated import CalibratedStream
@@ -169,8 +169,7 @@ def run_check(
         slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
         total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
         if total == 0:
-            frames = {t: len(v) for t, v in inputs.stamps.items()}
-            raise BagError(no_pairs_reason(spec, frames, 0, slop_ns, "--sync-slop"))
+            raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "--sync-slop"))
         if args.max_pairs:
             total = min(total, args.max_pairs)
         rig = _Rig(rectified, _monitor_config(args))

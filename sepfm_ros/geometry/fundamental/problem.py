@@ -20,6 +20,7 @@ from sepfm_ros.geometry.epipolar import (
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.nonlinear import polish_local_optimization
 from sepfm_ros.geometry.fundamental.refine import iterative_refit, lmeds_refit
+from sepfm_ros.geometry.robust.contract import Problem
 from sepfm_ros.geometry.robust.lmeds import RobustScale, robust_scale
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.orientation import oriented_consistent
@@ -83,7 +84,7 @@ LO_SCHEMES: dict[str, tuple[tuple[float, ...], int, bool]] = {
 }
 
 
-class FundamentalProblem:
+class FundamentalProblem(Problem):
     """One RANSAC arm estimating F.
 
     Args:
@@ -111,7 +112,7 @@ class FundamentalProblem:
             (:meth:`fixed_inliers`).
         oriented: drop the models for which the sample's own matches break the oriented
             epipolar constraint (``solvers.orientation``), before they are scored.
-        race_share: in a race (``ransac.run_ransac``), the most share of all samples this arm
+        race_share: in a race (``robust.race``), the most share of all samples this arm
             draws while an arm without a share is active (1: no limit).
     """
 
@@ -163,8 +164,13 @@ class FundamentalProblem:
         #: p of the robust scale: the points that determine a model (fixed ones included)
         self.model_points = 7 if solver == "seven" else 8
         self.scale = scale if scale is not None else RobustScale()
-        if scoring == "lmeds":
-            self.recount = self._recount  # the race re-counts arms when the scale shrinks
+        # lmeds: counts are within the best model's robust scale; the race re-counts the arms
+        # (recount: the size of ``inliers``) when the scale shrinks
+        self.relative_counts = scoring == "lmeds"
+
+    def free_sample_size(self) -> int:
+        """Points of a seven- or eight-point sample, fixed ones included."""
+        return self.model_points
 
     def fixed_inliers(self, model: np.ndarray) -> bool:
         """Whether every fixed correspondence lies within ``fixed_tol`` px (symmetric epipolar
@@ -201,10 +207,6 @@ class FundamentalProblem:
         the current robust threshold)."""
         thr = self.scale.threshold if self.scoring == "lmeds" else self.threshold
         return self.data.distances(model) < thr
-
-    def _recount(self, model: np.ndarray) -> int:
-        """lmeds: matches of ``model`` (3, 3) within the current robust inlier threshold."""
-        return int(np.count_nonzero(self.data.distances(model) < self.scale.threshold))
 
     def score_early(
         self,

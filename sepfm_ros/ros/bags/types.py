@@ -64,8 +64,6 @@ register_sepfm_msgs(TYPESTORE)
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-TWO_VIEW_ESTIMATE = "sepfm_msgs/msg/TwoViewEstimate"
-MATCH_ARRAY = "sepfm_msgs/msg/MatchArray"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"

@@ -22,7 +22,7 @@ from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.fundamental.refine import fit_least_squares
 from sepfm_ros.geometry.synthetic import make_pair
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 from bench_outliers import with_outliers  # noqa: E402
 
 

@@ -23,7 +23,7 @@ from sepfm_ros.pipeline.rectification import (
     vertical_disparity,
 )
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_rectify  # noqa: E402
 
 SIZE = (640, 480)

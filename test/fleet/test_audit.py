@@ -27,7 +27,7 @@ from sepfm_ros.ros.make_fleet import RigPlan, make_fleet
 pytestmark = pytest.mark.slow
 distributed = pytest.importorskip("distributed", reason="the fleet extra: pip install distributed")
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 MOTION_BAG = REPO_ROOT / "bags" / "synthetic_motion"
 RIGS = [
     RigPlan("robot_a"),

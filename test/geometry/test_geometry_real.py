@@ -13,7 +13,7 @@ from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
 
 pytestmark = pytest.mark.slow  # every shared pair, about 1.5 min on 2 cores
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_sep5_recovers_F_on_at_least_97_percent_of_real_pairs(shared_data):

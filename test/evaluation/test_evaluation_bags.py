@@ -15,7 +15,7 @@ from sepfm_ros.ros import make_bag, process
 
 pytestmark = pytest.mark.slow  # bags end to end through process and eval, about 50 s
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 BUNDLED = REPO / "bags"
 
 

@@ -9,7 +9,7 @@ import sys
 import textwrap
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 # Top-level names whose import (or any submodule's) is refused in the child interpreter.
 BLOCKED = ("rclpy", "sensor_msgs", "std_msgs", "diagnostic_msgs", "builtin_interfaces")
 

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_docs  # noqa: E402
 import bench_lines  # noqa: E402
 
-PAPER_TEX = Path(__file__).resolve().parents[2] / "shared" / "paper" / "separable_four_points_F.tex"
+PAPER_TEX = Path(__file__).resolve().parents[3] / "shared" / "paper" / "separable_four_points_F.tex"
 
 
 def test_two_pairs_two_methods_print_and_write_docs(shared_data_lines, tmp_path, capsys):

@@ -22,7 +22,7 @@ from sepfm_ros.ros.bags.writer import write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image
 from sepfm_ros.synthetic.sequences import stereo_sequence
 
-REPO_ROOT = Path(__file__).resolve().parent.parent
+REPO_ROOT = Path(__file__).resolve().parents[2]
 FRAMES = 12
 IMAGE = "sensor_msgs/msg/Image"
 INFO = "sensor_msgs/msg/CameraInfo"

@@ -29,7 +29,7 @@ from sepfm_ros.ros.image_conversion import image_to_numpy  # noqa: E402
 from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_rectify  # noqa: E402
 
 TwoViewEstimate, Match, MatchArray = (

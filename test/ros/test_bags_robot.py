@@ -43,7 +43,7 @@ from sepfm_ros.ros.process import parse_params, run_process
 from sepfm_ros.ros.results import gt_error_px, read_results
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 N_PAIRS = 4
 LAG_NS = 12_000_000
 PARAMS = ["seed:=3"]

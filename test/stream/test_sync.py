@@ -3,11 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
-from builtin_interfaces.msg import Time
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.stream.sync import LEFT, RIGHT, ApproximateTimeSync
 
 MS = 1_000_000
@@ -120,11 +118,6 @@ def test_configure_validates_and_shrinks():
         except ValueError:
             continue
         raise AssertionError(f"configure{bad} did not raise")
-
-
-def test_stamp_ns():
-    assert stamp_ns(Time(sec=3, nanosec=250)) == 3_000_000_250
-    assert stamp_ns(Time(sec=-2, nanosec=999_999_999)) == -1_000_000_001
 
 
 @settings(max_examples=200, deadline=None)

@@ -39,7 +39,7 @@ from sepfm_ros.ros.process import parse_params, run_process
 from sepfm_ros.ros.results import gt_error_px, read_results
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
-REPO = Path(__file__).resolve().parent.parent
+REPO = Path(__file__).resolve().parents[2]
 N_FRAMES = 3
 PARAMS = ["seed:=0"]
 

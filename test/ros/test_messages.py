@@ -161,3 +161,12 @@ def test_decode_pair_refuses_a_frame_size_change_of_one_camera_only():
     broken.data = bytes(10)
     bad = decode_pair(broken, big, stereo=True)
     assert isinstance(bad, BadInput) and bad.kind == "short_data"
+
+
+def test_stamp_ns():
+    from builtin_interfaces.msg import Time
+
+    from sepfm_ros.ros.messages import stamp_ns
+
+    assert stamp_ns(Time(sec=3, nanosec=250)) == 3_000_000_250
+    assert stamp_ns(Time(sec=-2, nanosec=999_999_999)) == -1_000_000_001

@@ -54,7 +54,7 @@ def test_ground_truth_fundamental_is_exact():
 
 
 def _load_script():
-    path = Path(__file__).resolve().parent.parent / "scripts" / "make_bundled_bags.py"
+    path = Path(__file__).resolve().parents[2] / "scripts" / "make_bundled_bags.py"
     spec = importlib.util.spec_from_file_location("make_bundled_bags", path)
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -30,7 +30,17 @@ SCORINGS = ("msac", "lmeds")
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
+def solve_samples_kernel(
+    f1: np.ndarray,
+    f2: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    samples: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    seven: bool,
+    oriented: bool,
+) -> tuple[np.ndarray, np.ndarray]:
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
@@ -199,7 +209,7 @@ class FundamentalProblem(Problem):
             return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
         d = self.distances(models)
         cost = np.median(d * d, axis=1)
-        self.scale.update(robust_scale(cost.min(), self.n, self.model_points))
+        self.scale.update(float(robust_scale(cost.min(), self.n, self.model_points)))
         return cost, np.count_nonzero(d < self.scale.threshold, axis=1)
 
     def inliers(self, model: np.ndarray) -> np.ndarray:

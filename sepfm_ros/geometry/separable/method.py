@@ -1,4 +1,4 @@
-"""The separable two-stage method (paper Sec. 4): line pairs, stage 1 (H_e on each line pair,
+"""The separable two-stage method (paper Sec. 5): line pairs, stage 1 (H_e on each line pair,
 as its arm joins), stage 2 (the race of 3 fixed + 4 or 5 sampled arms) and the fallback to
 standard RANSAC from the best model so far."""
 

@@ -1,4 +1,4 @@
-"""In-sample plane check of the separable stage 2 (fundamental_problem.line_plane_degenerate):
+"""In-sample plane check of the separable stage 2 (separable.line_planes):
 the 3 fixed line points fit the homography of every plane containing their 3D line, so 2 more
 sampled points on such a plane make a sample plane-degenerate. Unit tests of the compiled check,
 then sep against ransac on synthetic plane-majority scenes (test_degeneracy.planar_majority_pair)

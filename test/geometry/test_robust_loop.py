@@ -53,7 +53,7 @@ class StubProblem(Problem):
 
 
 @pytest.mark.parametrize(
-    "k, good, n, p", [(4, 50, 100, 0.99), (7, 80, 100, 0.99), (4, 30, 200, 0.95), (3, 9, 10, 0.999)]
+    "k, good, n, p", [(4, 50, 100, 0.99), (7, 80, 100, 0.99), (4, 60, 200, 0.95), (3, 9, 10, 0.999)]
 )
 def test_the_loop_stops_exactly_at_f_k_r_of_the_best_inlier_ratio(k, good, n, p):
     # every model has `good` inliers: the stop is F(k, r) from the first sample on, and the

@@ -1,4 +1,4 @@
-"""PROSAC sampling, SPRT and bail-out early rejection of the shared RANSAC loop (ransac.py)."""
+"""PROSAC sampling, SPRT and bail-out early rejection of the shared RANSAC loop (robust/)."""
 
 from __future__ import annotations
 

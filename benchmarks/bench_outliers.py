@@ -37,8 +37,8 @@ from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, EstimatorOptions, estimate_fundamental
-from sepfm_ros.geometry.estimator import sample_cap
-from sepfm_ros.geometry.ransac import ransac_trials
+from sepfm_ros.geometry.fundamental.task import sample_cap
+from sepfm_ros.geometry.robust.trials import ransac_trials
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"

@@ -31,7 +31,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from sepfm_ros.geometry.pose import (
+from sepfm_ros.geometry.calibrated.pose import (
     direction_error_deg,
     normalized_points,
     pose_from_projections,

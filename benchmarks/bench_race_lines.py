@@ -55,7 +55,7 @@ from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, estimate_fundamental
 from sepfm_ros.geometry.compiled import warm_up as warm_up_geometry
-from sepfm_ros.geometry.estimator import EstimatorOptions
+from sepfm_ros.geometry.options import EstimatorOptions
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"

@@ -35,7 +35,7 @@ TESTS = ["test/test_robustness_live.py", "test/test_robustness_bags.py", "test/t
 TITLES = {
     "fuzz_raw": "Fuzz: malformed sensor_msgs/Image to the live node",
     "fuzz_compressed": "Fuzz: malformed sensor_msgs/CompressedImage to the live node",
-    "degenerate_geometry": "Degenerate geometry through the node (status on ~/estimate_info)",
+    "degenerate_geometry": "Degenerate geometry through the node (status on ~/estimate)",
     "camera_stop": "Stereo: the right camera stops for 3 s, then returns",
     "dds_peer_churn": "A DDS subscriber process started and SIGKILLed repeatedly",
     "overload": "Overload: pairs at twice the processing rate",
@@ -93,7 +93,7 @@ def overload_table(runs: list[dict]) -> str:
         "",
         f"{within} of {len(runs)} runs within the bound; ratio min {min(ratios)}, "
         f"median {sorted(ratios)[len(ratios) // 2]}, max {max(ratios)}. The node-side ratio "
-        "uses the node's own latency (receipt to publish, from ~/estimate_info), without the "
+        "uses the node's own latency (receipt to publish, from ~/estimate), without the "
         "sending and receiving test process. The ratio to half rate uses the p95 of a steady "
         "stream at half the processing rate (the recovery phase) as the unloaded reference "
         "instead of one pair at a time; 'within 2x' is judged on the stricter first ratio.",
@@ -162,7 +162,7 @@ def main(argv: list[str] | None = None) -> int:
         "Sizes: "
         f"{args.fuzz_raw} + {args.fuzz_compressed} malformed messages, {args.overload_s:g} s "
         f"overload, {args.kill_trials} SIGKILL trials. Memory is the node process's resident set "
-        "size (VmRSS); latency is end to end (pair published by the test -> ~/estimate_info "
+        "size (VmRSS); latency is end to end (pair published by the test -> ~/estimate "
         "received)."
     )
     command = bench_docs.command_line("bench_robustness.py", argv)

@@ -6,6 +6,7 @@ Layers (each calls only downward):
   baselines, minimal solvers, epipolar helpers.
 - :mod:`sepfm_ros.pipeline` -- images to features to matches to estimate, shared by the node and
   offline processing.
+- :mod:`sepfm_ros.stream` -- ROS-free stream logic: pairing, sync, scheduling, health.
 - :mod:`sepfm_ros.ros` -- ROS adapters: message conversion, the node, bags.
 - :mod:`sepfm_ros.cli` -- the ``sepfm_ros`` console command.
 """

@@ -96,6 +96,7 @@ def replay_through_node(
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
+    from sepfm_ros.ros.bags.inputs import camera_info_topics
     from sepfm_ros.ros.bags.writer import BagWriter
     from sepfm_ros.ros.process import detect_inputs, expected_pairs, parse_params
     from sepfm_ros.ros.record import Recorder
@@ -145,7 +146,7 @@ def replay_through_node(
     try:
         # the images and, where the bag has them, their camera_info (calibrated outputs)
         with BagReader(bag) as reader:
-            infos = [t for t in spec.camera_info_topics() if t in reader.topics]
+            infos = [t for t in camera_info_topics(reader, spec) if t in reader.topics]
         # reliable whatever the bag recorded: a best-effort camera's recording would otherwise
         # lose its large frames to the transport on this host (sepfm_ros/ros/dds.py)
         replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate, reliable=True)
@@ -166,7 +167,7 @@ def replay_through_node(
             time.sleep(0.05)
         time.sleep(0.2)
         published = replayer.run(progress=progress)
-        info_topic = output_topics()["estimate_info"]
+        info_topic = output_topics()["estimate"]
         last, last_count = time.monotonic(), -1
         while recorder.counts[info_topic] < expected:
             if recorder.counts[info_topic] != last_count:
@@ -223,22 +224,29 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
     from diagnostic_msgs.msg import DiagnosticStatus
     from rclpy.serialization import deserialize_message
 
-    from sepfm_ros.geometry.calibration_check import LEVEL_NAMES
+    from sepfm_msgs.msg import TwoViewEstimate
+    from sepfm_ros.geometry.calibrated.calibration_check import LEVEL_NAMES
     from sepfm_ros.ros.results import calibrated_topics
 
-    poses = [r.info for r in results if r.info and r.info.get("pose_status") == "ok"]
+    poses = [
+        r.estimate
+        for r in results
+        if r.estimate is not None and r.estimate.pose_kind != TwoViewEstimate.POSE_NONE
+    ]
     if not poses:
         return None
-    rotation = float(np.median([float(v["rotation_deg"]) for v in poses]))
-    direction = np.median(
-        [[float(x) for x in v["translation_direction"].split()] for v in poses], axis=0
-    )
+    rotation = float(np.median([p.rotation_deg for p in poses]))
+    translations = [
+        [p.pose.translation.x, p.pose.translation.y, p.pose.translation.z] for p in poses
+    ]
+    directions = [np.asarray(t) / np.linalg.norm(t) for t in translations]
+    direction = np.median(directions, axis=0)
     line = (
         f"relative pose (camera_info): {len(poses)} pairs, median rotation {rotation:.2f} deg,"
         f" translation direction {np.round(direction, 3).tolist()}"
     )
-    if poses[-1].get("baseline_m"):
-        line += f", baseline {float(poses[-1]['baseline_m']):.3f} m"
+    if poses[-1].pose_kind == TwoViewEstimate.POSE_METRIC:
+        line += f", baseline {float(np.linalg.norm(translations[-1])):.3f} m"
     topic = calibrated_topics()["calibration_check"]
     with BagReader(live_bag) as reader:
         if topic in reader.topics:

@@ -10,8 +10,10 @@ header stamps, as ``ros2 bag record`` on the robot's clock gives them.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import io
+from collections.abc import Callable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from rosbags.interfaces import (
@@ -34,6 +36,7 @@ FORMATS = ("sqlite3", "mcap", "ros1")
 LEFT_TOPIC = "/camera/left/image_raw"
 RIGHT_TOPIC = "/camera/right/image_raw"
 IMAGE_T = "sensor_msgs/msg/Image"
+COMPRESSED_T = "sensor_msgs/msg/CompressedImage"
 INFO_T = "sensor_msgs/msg/CameraInfo"
 TF_T = "tf2_msgs/msg/TFMessage"
 GT_TOPIC = "/ground_truth/fundamental"
@@ -70,6 +73,46 @@ def _image(ts, header, img: np.ndarray):
         is_bigendian=0,
         step=3 * w if colour else w,
         data=np.ascontiguousarray(img, np.uint8).reshape(-1),
+    )
+
+
+def zero_step_image(ts, header, img: np.ndarray):
+    """Like :func:`_image` with ``step`` 0, as some robots' drivers publish (packed rows)."""
+    msg = _image(ts, header, img)
+    msg.step = 0
+    return msg
+
+
+def big_endian_mono16(ts, header, img: np.ndarray):
+    """A mono8 (H, W) array as mono16 big-endian (value x 257, ``is_bigendian`` 1)."""
+    h, w = img.shape
+    pixels = img.astype(">u2") * np.uint16(257)
+    return ts.types[IMAGE_T](
+        header=header,
+        height=h,
+        width=w,
+        encoding="mono16",
+        is_bigendian=1,
+        step=2 * w,
+        data=np.frombuffer(pixels.astype(">u2").tobytes(), np.uint8),
+    )
+
+
+def qoi_bytes(img: np.ndarray) -> bytes:
+    """A mono8 (H, W) array as QOI data (RGB, grey in every channel), encoded by Pillow."""
+    from PIL import Image as PilImage
+
+    out = io.BytesIO()
+    PilImage.fromarray(np.dstack([img] * 3)).save(out, format="QOI")
+    return out.getvalue()
+
+
+def qoi_compressed(ts, header, img: np.ndarray):
+    """A sensor_msgs/CompressedImage of QOI data (format ``rgb8; qoi compressed rgb8``)."""
+    return ts.types[COMPRESSED_T](
+        header=header,
+        format="rgb8; qoi compressed rgb8",
+        data=np.frombuffer(qoi_bytes(img), np.uint8),
     )
 
 
@@ -125,12 +168,18 @@ def write_robot_bag(
     topics: tuple[str, str] = (LEFT_TOPIC, RIGHT_TOPIC),
     extra_image_topics: Sequence[str] = (),
     ground_truth: Sequence[np.ndarray] | None = None,
+    image: Callable[[Any, Any, np.ndarray], Any] = _image,
+    image_type: str = IMAGE_T,
+    info_topics: tuple[str, str] | None = None,
 ) -> Path:
     """Write ``frames`` (left, right mono8 arrays) as a robot's stereo recording; returns ``path``.
 
     ``extra_image_topics`` get a copy of the left image (for bags with more cameras than two).
     ``ground_truth``: a 3x3 F per frame, written as ``/ground_truth/fundamental`` (Image 64FC1,
     row-major, stamped like the left image) the way ``make_bag`` stores it.
+    ``image(typestore, header, array)`` makes each camera message, of type ``image_type``
+    (a driver's quirks: :func:`zero_step_image`, :func:`big_endian_mono16`,
+    :func:`qoi_compressed`). ``info_topics``: the camera_info topics (default: beside the images).
     """
     if fmt not in FORMATS:
         raise ValueError(f"fmt must be one of {FORMATS}")
@@ -146,12 +195,14 @@ def write_robot_bag(
     else:
         plugin = StoragePlugin.SQLITE3 if fmt == "sqlite3" else StoragePlugin.MCAP
         writer = Writer2(path, version=9, storage_plugin=plugin)
-    info_topics = tuple(t.rsplit("/", 1)[0] + "/camera_info" for t in topics)
+    if info_topics is None:
+        info_topics = (topics[0].rsplit("/", 1)[0] + "/camera_info",
+                       topics[1].rsplit("/", 1)[0] + "/camera_info")  # fmt: skip
     with writer:
         conns = {}
         for topic, msgtype in [
-            (topics[0], IMAGE_T),
-            (topics[1], IMAGE_T),
+            (topics[0], image_type),
+            (topics[1], image_type),
             (info_topics[0], INFO_T),
             (info_topics[1], INFO_T),
             ("/tf", TF_T),
@@ -167,9 +218,9 @@ def write_robot_bag(
             hr = _header(ts, fmt, t_right, "right_camera_optical_frame", k)
             messages += [
                 (t_left, "/tf", _tf(ts, _header(ts, fmt, t_left, "base_link", k), "camera"), TF_T),
-                (t_left, topics[0], _image(ts, hl, left), IMAGE_T),
+                (t_left, topics[0], image(ts, hl, left), image_type),
                 (t_left, info_topics[0], _camera_info(ts, fmt, hl, (w, h), K, P_left), INFO_T),
-                (t_right, topics[1], _image(ts, hr, right), IMAGE_T),
+                (t_right, topics[1], image(ts, hr, right), image_type),
                 (t_right, info_topics[1], _camera_info(ts, fmt, hr, (w, h), K, P_right), INFO_T),
             ]
             messages += [(t_left, t, _image(ts, hl, left), IMAGE_T) for t in extra_image_topics]
@@ -223,6 +274,24 @@ def write_camera_bag(
             t = START_NS + k * period_ns
             msg = _image(ts, _header(ts, "sqlite3", t, "camera_optical_frame", k), img)
             writer.write(conn, t, bytes(ts.serialize_cdr(msg, IMAGE_T)))
+    return path
+
+
+def write_stereo_without_right(path: Path, left: np.ndarray, ground_truth: bool = False) -> Path:
+    """A rosbag2 stereo bag whose right topic was recorded but holds no message."""
+    ts = _typestore("mcap")
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn_l = writer.add_connection(LEFT_TOPIC, IMAGE_T, typestore=ts)
+        writer.add_connection(RIGHT_TOPIC, IMAGE_T, typestore=ts)
+        header = _header(ts, "mcap", START_NS, "left", 0)
+        writer.write(conn_l, START_NS, bytes(ts.serialize_cdr(_image(ts, header, left), IMAGE_T)))
+        if ground_truth:
+            gt = writer.add_connection(GT_TOPIC, IMAGE_T, typestore=ts)
+            F = np.frombuffer(np.eye(3).tobytes(), np.uint8)
+            msg = ts.types[IMAGE_T](
+                header=header, height=3, width=3, encoding="64FC1", is_bigendian=0, step=24, data=F
+            )
+            writer.write(gt, START_NS, bytes(ts.serialize_cdr(msg, IMAGE_T)))
     return path
 
 

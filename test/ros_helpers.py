@@ -18,23 +18,20 @@ from pathlib import Path
 import numpy as np
 import rclpy
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
-from sensor_msgs.msg import Image, PointCloud2
+from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
-from sepfm_ros.ros.messages import (
-    ESTIMATE_STATUS_NAME,
-    fundamental_from_image,
-    matches_from_pointcloud2,
-    stamp_ns,
-    status_values,
-)
+from sepfm_msgs.msg import MatchArray, TwoViewEstimate
+from sepfm_ros.ros.messages import stamp_ns, status_values
+from sepfm_ros.ros.results import match_table
+from sepfm_ros.ros.typed_msgs import fundamental_from_msg
 
 REPO = Path(__file__).resolve().parent.parent
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
@@ -43,16 +40,22 @@ ANSWER_TIMEOUT = 30.0  # s; generous: the machine is shared and 2-core
 
 # --------------------------------------------------------------------------- node subprocess
 class NodeProcess:
-    """``python -m sepfm_ros node --ros-args ...`` as a subprocess with its output in a file."""
+    """``python -m sepfm_ros node --ros-args ...`` (or another ``command``) as a subprocess
+    with its output in a file."""
 
     def __init__(
-        self, name: str, tmp: Path, *ros_args: str, env: dict[str, str | None] | None = None
+        self,
+        name: str,
+        tmp: Path,
+        *ros_args: str,
+        env: dict[str, str | None] | None = None,
+        command: str = "node",
     ) -> None:
         """``env``: variables to set in the node's environment (None: unset it)."""
         self.name = name
         self.log_path = tmp / f"{name}.log"
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
-        cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={name}"]
+        cmd = [sys.executable, "-m", "sepfm_ros", command, "--ros-args", "-r", f"__node:={name}"]
         cmd += list(ros_args)
         environ = dict(os.environ, PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
         for key, value in (env or {}).items():
@@ -97,9 +100,8 @@ class Client:
         self.ros = ros
         self.node_name = node_name
         self.lock = threading.Lock()
-        self.fundamental: dict[int, Image] = {}
-        self.matches: dict[int, PointCloud2] = {}
-        self.info: dict[int, DiagnosticStatus] = {}
+        self.matches: dict[int, MatchArray] = {}
+        self.info: dict[int, TwoViewEstimate] = {}  # ~/estimate by output stamp
         self.debug: dict[int, Image] = {}
         self.health: list[dict[str, str]] = []
         self.info_time: dict[int, float] = {}  # output stamp -> time.monotonic() of receipt
@@ -111,13 +113,10 @@ class Client:
         prefix = f"/{node_name}"
         self.subs = [
             ros.node.create_subscription(
-                Image, f"{prefix}/fundamental", self._keep(self.fundamental), RELIABLE
+                MatchArray, f"{prefix}/matches", self._keep(self.matches), RELIABLE
             ),
             ros.node.create_subscription(
-                PointCloud2, f"{prefix}/matches", self._keep(self.matches), RELIABLE
-            ),
-            ros.node.create_subscription(
-                DiagnosticArray, f"{prefix}/estimate_info", self._on_info, RELIABLE
+                TwoViewEstimate, f"{prefix}/estimate", self._on_estimate, RELIABLE
             ),
             ros.node.create_subscription(
                 DiagnosticArray, "/diagnostics", self._on_diagnostics, RELIABLE
@@ -133,12 +132,10 @@ class Client:
 
         return callback
 
-    def _on_info(self, msg):
+    def _on_estimate(self, msg):
         with self.lock:
-            for status in msg.status:
-                if status.name == ESTIMATE_STATUS_NAME:
-                    self.info[stamp_ns(msg.header.stamp)] = status
-                    self.info_time[stamp_ns(msg.header.stamp)] = time.monotonic()
+            self.info[stamp_ns(msg.header.stamp)] = msg
+            self.info_time[stamp_ns(msg.header.stamp)] = time.monotonic()
 
     def _on_diagnostics(self, msg):
         with self.lock:
@@ -163,7 +160,7 @@ class Client:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             inputs = all(p.get_subscription_count() > 0 for p in self.pubs.values())
-            outputs = self.ros.node.count_publishers(f"/{self.node_name}/estimate_info") > 0
+            outputs = self.ros.node.count_publishers(f"/{self.node_name}/estimate") > 0
             if inputs and outputs and self._set.service_is_ready() and self._node_side_matched():
                 return
             time.sleep(0.05)
@@ -182,31 +179,31 @@ class Client:
     def publish(self, key: str, msg) -> None:
         self.pubs[key].publish(msg)
 
-    def wait_info(self, stamp: int, timeout: float = ANSWER_TIMEOUT) -> DiagnosticStatus:
+    def wait_info(self, stamp: int, timeout: float = ANSWER_TIMEOUT) -> TwoViewEstimate:
+        """The node's ~/estimate for the output stamp (ns)."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             with self.lock:
                 if stamp in self.info:
                     return self.info[stamp]
             time.sleep(0.01)
-        raise AssertionError(f"no ~/estimate_info for stamp {stamp} within {timeout} s")
+        raise AssertionError(f"no ~/estimate for stamp {stamp} within {timeout} s")
 
     def wait_outputs(self, stamp: int, need_f: bool = True, timeout: float = ANSWER_TIMEOUT):
-        """(info values, F or None, matches array) for the output stamp."""
-        status = self.wait_info(stamp, timeout)
+        """(TwoViewEstimate, F (3, 3) or None, match table) for the output stamp; the match
+        table is :func:`~sepfm_ros.ros.results.match_table` of ~/matches. ``need_f``: an
+        answer without F fails the test with its status."""
+        estimate = self.wait_info(stamp, timeout)
+        if need_f and not estimate.has_f:
+            raise AssertionError(f"no F for stamp {stamp}: {estimate.status_text}")
         deadline = time.monotonic() + 5.0
         while time.monotonic() < deadline:
             with self.lock:
-                have_f = stamp in self.fundamental
-                if stamp in self.matches and (have_f or not need_f):
-                    f_msg = self.fundamental.get(stamp)
-                    return (
-                        status_values(status) | {"_level": status.level, "_msg": status.message},
-                        None if f_msg is None else fundamental_from_image(f_msg),
-                        matches_from_pointcloud2(self.matches[stamp]),
-                    )
+                if stamp in self.matches:
+                    F = fundamental_from_msg(estimate) if estimate.has_f else None
+                    return estimate, F, match_table(self.matches[stamp])
             time.sleep(0.01)
-        raise AssertionError(f"F/matches for stamp {stamp} missing (info: {status_values(status)})")
+        raise AssertionError(f"~/matches for stamp {stamp} missing ({estimate.status_text})")
 
     def latest_health(self, after: float, timeout: float = 10.0) -> dict[str, str]:
         """A /diagnostics report of this node received at least ``after`` s from now."""

@@ -165,7 +165,7 @@ def test_process_interrupted_leaves_readable_bag(tmp_path, sig, background):
         preexec_fn=as_background_job if background else None,
     )
     deadline = time.monotonic() + 60
-    while _count(out, "/sepfm/estimate_info") < 3:  # the metadata is rewritten atomically
+    while _count(out, "/sepfm/estimate") < 3:  # the metadata is rewritten atomically
         assert proc.poll() is None, proc.communicate()
         assert time.monotonic() < deadline
         time.sleep(0.02)
@@ -185,8 +185,9 @@ def test_process_interrupted_leaves_readable_bag(tmp_path, sig, background):
     full = {r.stamp_ns: r for r in read_results(_full_run(tmp_path))}
     for r in partial:
         np.testing.assert_array_equal(r.F, full[r.stamp_ns].F)
-        assert np.array_equal(r.cloud, full[r.stamp_ns].cloud)
-        assert r.info["inliers"] == full[r.stamp_ns].info["inliers"]
+        assert np.array_equal(r.match_rows, full[r.stamp_ns].match_rows)
+        ref = full[r.stamp_ns].estimate
+        assert (r.estimate.status, r.estimate.inliers) == (ref.status, ref.inliers)
     assert [r.stamp_ns for r in partial] == sorted(full)[: len(partial)]
 
 
@@ -292,7 +293,7 @@ def test_existing_output_is_refused_and_untouched(tmp_path):
     for args in (
         ("process", str(STEREO), "-o", str(out)),
         ("make_bag", "--synthetic", "stereo", "--frames", "2", "-o", str(out)),
-        ("record", "-o", str(out), "/sepfm/fundamental"),
+        ("record", "-o", str(out), "/sepfm/estimate"),
     ):
         res = run_cli(*args)
         assert res.returncode == 1, (args, res.stderr)

@@ -294,7 +294,7 @@ def test_a_definition_rosbags_cannot_verify_does_not_lose_the_bag(kitti_frames, 
 def test_calibration_check_on_a_lagging_ros1_robot_bag(kitti_frames, shared_data, tmp_path):
     """calibration_check reads a robot's ROS 1 bag as process does: its topic names picked,
     the camera_info beside them, the right camera 12 ms late; KITTI's own calibration is OK."""
-    from sepfm_ros.geometry.pose import pose_from_projections
+    from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 
     cams = json.loads((shared_data / "cameras.json").read_text())
     K_a, _, _, t = pose_from_projections(
@@ -336,5 +336,5 @@ def test_process_a_rig_of_two_different_cameras(tmp_path, capsys):
     results = read_results(tmp_path / "out")
     assert len(results) == len(frames)
     for r, frame in zip(results, frames, strict=True):
-        assert r.status == "ok" and r.info["size_b"] == "400x300"
+        assert r.status == "ok" and (r.estimate.width_b, r.estimate.height_b) == (400, 300)
         assert gt_error_px(r.F, pair_fundamental(*frame.cameras), *r.pts()) < 1.0

@@ -1,5 +1,5 @@
 """benchmarks/bench_ablation.py on two shared pairs: one row per configuration and anchor, with
-figures in range, and the docs it writes (its section of docs/benchmarks.md, README's block)."""
+figures in range, and the docs it writes (its section of docs/benchmarks.md)."""
 
 from __future__ import annotations
 
@@ -15,12 +15,9 @@ from sepfm_ros.geometry import DEFAULT_METHOD  # noqa: E402
 
 
 def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path, capsys):
-    doc, readme = tmp_path / "benchmarks.md", tmp_path / "README.md"
+    doc = tmp_path / "benchmarks.md"
     doc.write_text(bench_docs.empty_document())
-    begin, end = bench_docs.markers("ablation")
-    readme.write_text(f"# Title\n\n{begin}\nOLD-CONTENT\n{end}\n\nrest\n")
-    argv = ["--sets", "shared", "--step", "100", "--write-docs", "--doc", str(doc),
-            "--readme", str(readme)]  # fmt: skip
+    argv = ["--sets", "shared", "--step", "100", "--write-docs", "--doc", str(doc)]
     assert bench_ablation.main(argv) == 0
     out = capsys.readouterr().out
     assert "(2 pairs: every 100th of pairs.json; seed 0)" in out
@@ -37,6 +34,4 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
     body = bench_docs.read_block(doc.read_text(), "bench_ablation")
     assert body.startswith(f"## Ablation of the default method ({DEFAULT_METHOD})")
     assert "Not generated yet" in bench_docs.read_block(doc.read_text(), "bench_estimators")
-    block = bench_docs.read_block(readme.read_text(), "ablation")
-    assert "OLD-CONTENT" not in block and f"| {DEFAULT_METHOD} (default) |" in block
-    assert readme.read_text().endswith("\nrest\n")
+    assert f"| {DEFAULT_METHOD} (default) |" in body

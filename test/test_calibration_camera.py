@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from sepfm_ros.geometry.camera import CalibrationError, camera_model, undistort_points
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, camera_model, undistort_points
 
 K = np.array([[520.0, 0.0, 330.0], [0.0, 515.0, 238.0], [0.0, 0.0, 1.0]])
 W, H = 640, 480

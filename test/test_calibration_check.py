@@ -6,7 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
-from sepfm_ros.geometry.calibration_check import (
+from sepfm_ros.geometry.calibrated.calibration_check import (
     ERROR,
     OK,
     STALE,
@@ -17,7 +17,7 @@ from sepfm_ros.geometry.calibration_check import (
     StereoCalibration,
     check_pair,
 )
-from sepfm_ros.geometry.camera import camera_model, undistort_points
+from sepfm_ros.geometry.calibrated.camera import camera_model, undistort_points
 
 SIZE = (1280, 720)
 K_A = np.array([[700.0, 0, 630.0], [0, 705.0, 370.0], [0, 0, 1]])

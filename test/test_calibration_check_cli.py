@@ -16,7 +16,7 @@ from rclpy.serialization import serialize_message
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.pose import pose_from_projections
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import write_bag
 from sepfm_ros.ros.image_conversion import numpy_to_image

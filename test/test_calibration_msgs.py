@@ -9,14 +9,13 @@ from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import WARN, CalibrationStatus
-from sepfm_ros.geometry.camera import CalibrationError
-from sepfm_ros.geometry.pose import RelativePose
+from sepfm_ros.geometry.calibrated.calibration_check import WARN, CalibrationStatus
+from sepfm_ros.geometry.calibrated.camera import CalibrationError
+from sepfm_ros.geometry.calibrated.pose import RelativePose
 from sepfm_ros.ros.calibration_msgs import (
     calibration_error_status,
     calibration_status,
     camera_model_from_info,
-    pose_values,
     relative_transform,
 )
 from sepfm_ros.ros.messages import status_values
@@ -73,18 +72,6 @@ def test_relative_transform_is_b_in_a():
     # maps b-coordinates to a-coordinates: X_a = R_ba X_b + p_ba inverts X_b = R X_a + t
     X_a = np.array([0.3, -0.2, 4.0])
     np.testing.assert_allclose(R_ba @ (R @ X_a + t) + p_ba, X_a, atol=1e-9)
-
-
-def test_pose_values_stereo():
-    pose = RelativePose(np.eye(3), np.array([-0.537, 0.0, 0.0]), 0.99, 400)
-    v = pose_values(pose, "undistorted", scaled=True)
-    assert v["coordinates"] == "undistorted" and v["translation_scale"] == "baseline_m"
-    assert v["translation_direction"] == "1.000000 0.000000 0.000000"
-    assert v["baseline_m"] == pytest.approx(0.537)
-    bad = pose_values(
-        RelativePose(np.eye(3), np.zeros(3), 0.0, 3, "too few inliers: 3"), "image", 0
-    )
-    assert "rotation_deg" not in bad and bad["pose_status"].startswith("too few")
 
 
 def test_calibration_status_message():

@@ -9,9 +9,8 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental, normalize_fundamental
-from sepfm_ros.geometry.camera import camera_model
-from sepfm_ros.geometry.epipolar import fundamental_from_cameras
-from sepfm_ros.geometry.pose import (
+from sepfm_ros.geometry.calibrated.camera import camera_model
+from sepfm_ros.geometry.calibrated.pose import (
     direction_error_deg,
     essential_from_fundamental,
     fundamental_from_pose,
@@ -23,6 +22,7 @@ from sepfm_ros.geometry.pose import (
     stereo_fundamental,
     stereo_pose,
 )
+from sepfm_ros.geometry.epipolar import fundamental_from_cameras
 from sepfm_ros.geometry.synthetic import make_pair
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 

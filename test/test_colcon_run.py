@@ -66,7 +66,7 @@ def installed_env(install: Path) -> dict[str, str]:
 
 def test_colcon_build_installs_executables_and_share_files(colcon_install):
     prefix = colcon_install / "sepfm_ros"
-    for name in ("node", "make_bag", "replay", "record", "process", "eval", "warm_up"):
+    for name in ("node", "make_bag", "replay", "record", "process", "eval", "warm_up", "rectify"):
         assert os.access(prefix / "lib" / "sepfm_ros" / name, os.X_OK), name
     share = prefix / "share" / "sepfm_ros"
     assert (share / "package.xml").is_file()

@@ -1,8 +1,8 @@
-"""The DEGENSAC-style dominant-plane check (sepfm_ros/geometry/degeneracy.py) on synthetic
-planar-majority scenes: most 3D points on one plane, a few off it, many outliers. Without the
-check the estimator often returns a wrong F with status "ok" (the plane fixes all but three of
-F's degrees of freedom and outliers outvote the few off-plane points); with it, such an F is
-either replaced by a plane-and-parallax F or flagged. Prints the counts.
+"""The DEGENSAC-style dominant-plane check (sepfm_ros/geometry/fundamental/degeneracy.py) on
+synthetic planar-majority scenes: most 3D points on one plane, a few off it, many outliers.
+Without the check the estimator often returns a wrong F with status "ok" (the plane fixes all
+but three of F's degrees of freedom and outliers outvote the few off-plane points); with it,
+such an F is either replaced by a plane-and-parallax F or flagged. Prints the counts.
 """
 
 from __future__ import annotations
@@ -12,7 +12,8 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
-from sepfm_ros.geometry.degeneracy import (
+from sepfm_ros.geometry.epipolar import fundamental_from_cameras
+from sepfm_ros.geometry.fundamental.degeneracy import (
     chance_inliers,
     parallax_models,
     plane_and_parallax,
@@ -20,7 +21,6 @@ from sepfm_ros.geometry.degeneracy import (
     robust_homography,
     transfer_error,
 )
-from sepfm_ros.geometry.epipolar import fundamental_from_cameras
 from sepfm_ros.geometry.synthetic import look_at_camera
 
 SIZE = (640, 480)

@@ -22,6 +22,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from optional_tools import detector_param
 
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.manifest import load_manifest
@@ -273,7 +274,8 @@ def test_cache_key_follows_content_and_settings(tmp_path, shared_data):
         MatchSettings(features="surf")
 
 
-def test_matches_are_distinct_and_orb_is_selectable(tmp_path, shared_data):
+@pytest.mark.parametrize("features", [detector_param(f) for f in ("sift", "orb", "akaze")])
+def test_matches_are_distinct_and_every_detector_is_selectable(tmp_path, shared_data, features):
     from sepfm_ros.evaluation.manifest import PairSpec
 
     spec = PairSpec(
@@ -283,12 +285,11 @@ def test_matches_are_distinct_and_orb_is_selectable(tmp_path, shared_data):
         img_a=shared_data / "templeRing" / "templeR0001.png",
         img_b=shared_data / "templeRing" / "templeR0002.png",
     )
-    for features in ("sift", "orb", "akaze"):  # AKAZE from opencv-contrib (xfeatures2d)
-        pm = MatchesCache(tmp_path / features, MatchSettings(features=features)).matches(spec)
-        rows = np.hstack([pm.pts_a, pm.pts_b])
-        assert len(pm.pts_a) > 50, features
-        assert len(np.unique(rows, axis=0)) == len(rows), features
-        assert pm.size_a == (640, 480)
+    pm = MatchesCache(tmp_path / features, MatchSettings(features=features)).matches(spec)
+    rows = np.hstack([pm.pts_a, pm.pts_b])
+    assert len(pm.pts_a) > 50
+    assert len(np.unique(rows, axis=0)) == len(rows)
+    assert pm.size_a == (640, 480)
 
 
 def test_a_method_that_raises_is_a_failed_run_not_a_crash():

@@ -10,10 +10,11 @@ from ground_truth import manifest_pair
 
 from sepfm_ros.evaluation.metrics import run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.ransac import SamplingOptions, run_ransac
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.robust.loop import run_ransac
+from sepfm_ros.geometry.robust.options import SamplingOptions
 from sepfm_ros.geometry.synthetic import make_pair
 
 

@@ -9,9 +9,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sepfm_ros.geometry import METHODS, estimate_fundamental, normalize_fundamental
-from sepfm_ros.geometry.estimator import sample_cap
-from sepfm_ros.geometry.line_homography_fit import fit_line_homography
-from sepfm_ros.geometry.line_pairs import LineSearchOptions, find_line_pairs, working_scale
+from sepfm_ros.geometry.fundamental.task import sample_cap
+from sepfm_ros.geometry.separable.line_pairs import (
+    LineSearchOptions,
+    find_line_pairs,
+    working_scale,
+)
+from sepfm_ros.geometry.separable.stage1 import fit_line_homography
 from sepfm_ros.geometry.synthetic import make_pair
 
 
@@ -179,7 +183,7 @@ def test_degenerate_data_gives_status_not_exception(method):
 
 
 def test_estimate_exposes_H_e_consistent_with_line_inliers():
-    from sepfm_ros.geometry.line_pairs import line_parameter
+    from sepfm_ros.geometry.separable.line_pairs import line_parameter
     from sepfm_ros.geometry.solvers.line_homography import transfer
 
     sp = make_pair(n_inliers=100, n_outliers=0, n_lines=2, points_per_line=15, noise=0.0, seed=9)
@@ -228,7 +232,7 @@ def test_one_sample_budget_per_call_shared_by_every_stage(method):
 
 
 def test_race_pool_options_are_checked_and_used():
-    from sepfm_ros.geometry.estimator import EstimatorOptions
+    from sepfm_ros.geometry.options import EstimatorOptions
 
     with pytest.raises(ValueError, match="race_pool must be one of"):
         EstimatorOptions(race_pool="leader")
@@ -244,7 +248,7 @@ def test_race_pool_options_are_checked_and_used():
 
 
 def test_spread_takes_matches_evenly_in_the_same_coordinates():
-    from sepfm_ros.geometry.correspondences import Correspondences
+    from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 
     rng = np.random.default_rng(0)
     data = Correspondences.from_pixels(
@@ -264,8 +268,8 @@ def test_local_optimisation_fits_on_at_most_lo_matches(method):
     """Option lo_matches: the LO's refits and Levenberg-Marquardt steps see only the spread
     subset (their models differ from those of LO on all matches), the race scores them on all
     matches, and the estimate stays right; a cap at or above the match count changes nothing."""
-    from sepfm_ros.geometry.correspondences import Correspondences
-    from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
+    from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+    from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 
     # 300 general + 3 x 12 line points, 0.5 px noise, 40 % outliers: 560 matches
     sp = make_pair(n_inliers=300, n_outliers=224, n_lines=3, noise=0.5, seed=4)

@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import msac_kernel, symmetric_epipolar_distance
-from sepfm_ros.geometry.nonlinear import (
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.nonlinear import (
     FINAL_TRUNCATION,
     LM_BAND,
     LM_MODEL_START,

@@ -160,7 +160,7 @@ def test_ransac_trials_paper_values():
 def test_draw_samples_distinct_uniform_and_seeded():
     from collections import Counter
 
-    from sepfm_ros.geometry.ransac import draw_samples
+    from sepfm_ros.geometry.robust.samplers import draw_samples
 
     pool = np.arange(100, 110)  # samples are entries of the pool, not positions
     s = draw_samples(np.random.default_rng(5), pool, 3, 60000)
@@ -184,7 +184,7 @@ def test_smallest_eigenvector_by_inverse_iteration_agrees_with_eigh():
     # the refits' inverse iteration against LAPACK eigh: Gram matrices of real design rows,
     # an exactly singular one (noise-free data), and starts near and far from the answer;
     # two equal smallest eigenvalues and a zero start fall back to eigh's own vector
-    from sepfm_ros.geometry.refine import smallest_eigenvector
+    from sepfm_ros.geometry.fundamental.refine import smallest_eigenvector
 
     rng = np.random.default_rng(0)
     sp = make_pair(n_inliers=60, n_outliers=0, noise=0.0, seed=3)
@@ -214,7 +214,7 @@ def test_smallest_eigenvector_by_inverse_iteration_agrees_with_eigh():
 def test_weighted_design_gram_is_the_weighted_sum_of_row_outer_products():
     """The refits' Gram matrix (weighted design rows as columns, ``column_gram``) against
     sum_k w_k^2 r_k r_k^T of the epipolar rows r = kron([x2, 1], [x1, 1]), on a subset of rows."""
-    from sepfm_ros.geometry.refine import _weighted_design
+    from sepfm_ros.geometry.fundamental.refine import _weighted_design
     from sepfm_ros.geometry.solvers.design import column_gram
 
     rng = np.random.default_rng(4)

@@ -1,4 +1,5 @@
-"""Inner sampling of the final model (option ``inner_samples``, ``geometry/inner_sampling.py``):
+"""Inner sampling of the final model (option ``inner_samples``,
+``geometry/fundamental/inner_sampling.py``):
 least-squares fits of samples of the final inliers start one more local optimisation, whose
 result is kept only if it is no worse at the threshold and at the noise truncation."""
 
@@ -13,12 +14,12 @@ from ground_truth import manifest_pair
 
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import msac_kernel
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.inner_sampling import MAX_INLIER_RATIO, inner_sampling
-from sepfm_ros.geometry.nonlinear import noise_truncation
-from sepfm_ros.geometry.refine import fit_least_squares
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.inner_sampling import MAX_INLIER_RATIO, inner_sampling
+from sepfm_ros.geometry.fundamental.nonlinear import noise_truncation
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.fundamental.refine import fit_least_squares
 from sepfm_ros.geometry.synthetic import make_pair
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "benchmarks"))

@@ -9,12 +9,10 @@ import cv2
 import numpy as np
 import pytest
 
-from sepfm_ros.geometry.line_homography_fit import (
-    line_homography_error,
-    stage1_ransac,
-    transfer_errors,
-)
-from sepfm_ros.geometry.line_pairs import (
+from sepfm_ros.geometry.robust.contract import Problem
+from sepfm_ros.geometry.robust.loop import run_ransac
+from sepfm_ros.geometry.robust.trials import trials_needed
+from sepfm_ros.geometry.separable.line_pairs import (
     LineSearchOptions,
     control_points,
     hough_lines,
@@ -23,7 +21,11 @@ from sepfm_ros.geometry.line_pairs import (
     rank_line_pairs,
     working_scale,
 )
-from sepfm_ros.geometry.ransac import run_ransac, trials_needed
+from sepfm_ros.geometry.separable.stage1 import (
+    line_homography_error,
+    stage1_ransac,
+    transfer_errors,
+)
 from sepfm_ros.geometry.solvers.line_homography import (
     line_homography_3pt,
     line_homography_3pt_kernel,
@@ -262,8 +264,9 @@ def test_control_points_are_the_farthest_border_intersections():
         assert np.allclose(ctrl @ line[:2] + line[2], 0.0, atol=1e-6)  # both on the line
 
 
-class _LineHomographyProblem:
-    """Stage 1 written as a :class:`sepfm_ros.geometry.ransac.Problem` for the generic loop."""
+class _LineHomographyProblem(Problem):
+    """Stage 1 written as a :class:`sepfm_ros.geometry.robust.contract.Problem` for the generic
+    loop."""
 
     sample_size = 3
 
@@ -291,6 +294,9 @@ class _LineHomographyProblem:
         err = np.array([self._errors(h) for h in models])
         cost = np.minimum(err * err, self.threshold**2).sum(axis=1)
         return cost, (err < self.threshold).sum(axis=1)
+
+    def inliers(self, model):
+        return self._errors(model) < self.threshold
 
     def local_optimize(self, model):
         inl = self._errors(model) < self.threshold

@@ -9,16 +9,13 @@ import pytest
 
 from sepfm_ros.evaluation.methods import REGISTRY, resolve_methods
 from sepfm_ros.geometry import METHODS, estimate_fundamental, normalize_fundamental
-from sepfm_ros.geometry import estimator as estimator_module
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import msac_kernel, symmetric_epipolar_distance
-from sepfm_ros.geometry.fundamental_problem import (
-    FundamentalProblem,
-    lmeds_final_inliers,
-    robust_scale,
-)
-from sepfm_ros.geometry.ransac import ransac_trials
-from sepfm_ros.geometry.refine import lmeds_refit
+from sepfm_ros.geometry.fundamental import final as final_module
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.fundamental.refine import lmeds_refit
+from sepfm_ros.geometry.robust.lmeds import lmeds_final_inliers, robust_scale
+from sepfm_ros.geometry.robust.trials import ransac_trials
 from sepfm_ros.geometry.synthetic import make_pair
 
 LMEDS = ["lmeds7", "lmeds8", "sep4-lmeds", "sep5-lmeds"]
@@ -130,11 +127,11 @@ def test_lmeds_selects_by_median_where_msac_would_not(monkeypatch):
     cost, _ = FundamentalProblem(data, "eight", 1.0, "msac").score(models)
     assert int(np.argmin(cost)) == 1
     # the final model: a refit candidate (here F_b) replaces F only by a lower median
-    monkeypatch.setattr(estimator_module, "lmeds_refit", lambda *a, **k: Fb[None])
-    F, refits = estimator_module._final_model_lmeds(Fa, data, 8, True)
+    monkeypatch.setattr(final_module, "lmeds_refit", lambda *a, **k: Fb[None])
+    F, refits = final_module._final_model_lmeds(Fa, data, 8, True)
     assert refits == 1 and np.allclose(F, Fa)
-    monkeypatch.setattr(estimator_module, "iterative_refit", lambda *a, **k: Fb[None])
-    F, _ = estimator_module._final_model(Fa, data, 1.0, True)
+    monkeypatch.setattr(final_module, "iterative_refit", lambda *a, **k: Fb[None])
+    F, _ = final_module._final_model(Fa, data, 1.0, True)
     assert np.allclose(F, Fb)  # where MSAC's final step would take F_b
 
 

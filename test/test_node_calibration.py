@@ -22,7 +22,8 @@ from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
-from sepfm_ros.geometry.pose import pose_from_projections  # noqa: E402
+from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections  # noqa: E402
 from sepfm_ros.ros.make_bag import camera_info_message, camera_infos  # noqa: E402
 from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 
@@ -117,7 +118,8 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
         for k in range(8):
             stamp = send(k)
             values, F, _ = client.wait_outputs(stamp)
-            assert values["coordinates"] == "undistorted" and values["pose_status"] == "ok"
+            assert values.coordinates == "undistorted" and values.pose_status == "ok"
+            assert values.pose_kind == TwoViewEstimate.POSE_METRIC
             deadline = time.monotonic() + 5.0
             while stamp not in outputs.pose and time.monotonic() < deadline:
                 time.sleep(0.01)
@@ -135,6 +137,9 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
             direction_errors.append(np.degrees(np.arccos(min(cos, 1.0))))
             # scaled by the calibrated baseline (metres)
             assert np.linalg.norm(position) == pytest.approx(np.linalg.norm(t_gt), rel=1e-6)
+            # ~/estimate carries the same pose
+            assert values.pose == tf.transform
+            assert values.rotation_deg == pytest.approx(angle, abs=1e-6)
         # a stereo pose from F alone trades a little yaw for forward translation on a short
         # baseline (measured on these pairs: rotation 0.6-0.8 deg, direction 0.5-8 deg); stated
         # error: rotation median below 1 degree (max 2), direction median below 5 (max 10)
@@ -165,7 +170,8 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
         # 3. an unusable camera_info: ERROR calibration status, F still estimated without it
         stamp = send(20, bad_info=True)
         values, F, _ = client.wait_outputs(stamp)
-        assert values["coordinates"] == "image" and F is not None
+        assert values.coordinates == "image" and F is not None
+        assert values.pose_kind == TwoViewEstimate.POSE_NONE and values.pose_status
         time.sleep(0.2)
         with outputs.lock:
             last = outputs.checks[-1]

@@ -8,7 +8,11 @@ shared by the checks; shutdown gets nodes of its own. A unique ROS_DOMAIN_ID per
 
 from __future__ import annotations
 
+import ast
+import os
 import signal
+import subprocess
+import sys
 import time
 
 import cv2
@@ -18,7 +22,6 @@ from ground_truth import gt_fundamental, median_gt_inlier_error
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from ros_helpers import (  # noqa: E402
     REPO,
     header,
@@ -29,8 +32,10 @@ from ros_helpers import (  # noqa: E402
 )
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
+from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance  # noqa: E402
 from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
+from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence  # noqa: E402
 
 KITTI_STEREO = [
@@ -120,15 +125,14 @@ def compressed(ros, tmp_path_factory):
     proc.stop()
 
 
-def assert_accurate(shared_data, values, F, cloud, img_a, img_b):
-    # F is published also when the estimator flags it (e.g. a dominant plane); then WARN level
-    assert F is not None, values["status"]
-    ok_level = DiagnosticStatus.OK if values["status"] == "ok" else DiagnosticStatus.WARN
-    assert values["_level"] == ok_level
+def assert_accurate(shared_data, est, F, cloud, img_a, img_b):
+    # F is published also when the estimator flags it (e.g. a dominant plane), with its code
+    assert F is not None, est.status_text
+    assert (est.status == TwoViewEstimate.STATUS_OK) == (est.status_text == "ok")
     pts_a = np.stack([cloud["u_a"], cloud["v_a"]], axis=1).astype(np.float64)
     pts_b = np.stack([cloud["u_b"], cloud["v_b"]], axis=1).astype(np.float64)
-    assert int(values["matches"]) == len(cloud)
-    assert int(values["inliers"]) == int(cloud["inlier"].sum())
+    assert est.matches == len(cloud)
+    assert est.inliers == int(cloud["inlier"].sum())
     err, n_gt = median_gt_inlier_error(F, gt_fundamental(shared_data, img_a, img_b), pts_a, pts_b)
     assert n_gt >= 30, f"{img_a} -> {img_b}: only {n_gt} GT-inlier matches"
     assert err < 1.0, f"{img_a} -> {img_b}: median GT-inlier error {err:.3f} px"
@@ -144,15 +148,17 @@ def test_stereo_kitti_left_right_matches_ground_truth(stereo, images, shared_dat
         send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
         values, F, cloud = client.wait_outputs(stamp)
         assert_accurate(shared_data, values, F, cloud, img_a, img_b)
-        assert values["stamp_a"] == values["stamp_b"]
-        for key in ("method", "hypotheses", "stage1_hypotheses", "stage2_hypotheses", "line_a"):
-            assert key in values
-        ms = {s: float(values[f"ms_{s}"]) for s in ("decode", "features", "match", "estimate")}
+        assert stamp_ns(values.stamp_a) == stamp_ns(values.stamp_b) == stamp
+        assert values.method == "sep4" and values.features == "orb"
+        assert values.hypotheses >= values.stage2_hypotheses > 0 and values.samples > 0
+        assert values.coordinates == "image" and values.pose_kind == TwoViewEstimate.POSE_NONE
+        assert (values.width_a, values.height_a) == images(img_a).shape[::-1]
+        timings = {t.stage: t.ms for t in values.timings}
+        ms = {s: timings[s] for s in ("decode", "features", "match", "estimate")}
         assert all(v > 0.0 for v in ms.values()), ms
-        assert float(values["ms_total"]) >= ms["features"] + ms["match"] + ms["estimate"]
-        with client.lock:
-            assert client.fundamental[stamp].header.frame_id == "cam"
-            assert client.fundamental[stamp].encoding == "64FC1"
+        assert timings["total"] >= ms["features"] + ms["match"] + ms["estimate"]
+        assert {"wait", "queue", "latency", "publish"} <= set(timings)
+        assert values.header.frame_id == "cam" and values.frame_id_b == "cam"
 
 
 def test_stereo_every_encoding(stereo, images, shared_data):
@@ -184,7 +190,7 @@ def test_stereo_sync_with_jittered_stamps(stereo, images):
     )
     values, F, _ = client.wait_outputs(stamp)
     assert np.isclose(np.linalg.norm(F), 1.0)
-    assert values["stamp_b"] == f"{(stamp + 3_000_000) // 10**9}.{(stamp + 3_000_000) % 10**9:09d}"
+    assert stamp_ns(values.stamp_b) == stamp + 3_000_000
     # right 8 ms after left (outside the slop): never paired
     lone = next_stamp()
     send_pair(client, image_msg(images(img_a), lone), image_msg(images(img_b), lone + 8_000_000))
@@ -207,7 +213,7 @@ def test_runtime_parameter_change_accepted_and_rejected(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
     values, _, cloud = client.wait_outputs(stamp, need_f=False)  # F or a reason, both fine here
-    assert int(values["matches"]) == 150 and len(cloud) == 150
+    assert values.matches == 150 and len(cloud) == 150
     for name, value, text in [
         ("features", "surf", "features must be one of"),
         ("max_features", -5, "max_features"),
@@ -229,7 +235,7 @@ def test_runtime_parameter_change_accepted_and_rejected(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
     values, F, _ = client.wait_outputs(stamp)
-    assert int(values["matches"]) > 150
+    assert values.matches > 150
 
 
 def test_malformed_messages_are_skipped_counted_and_logged_once(stereo, images):
@@ -256,7 +262,7 @@ def test_malformed_messages_are_skipped_counted_and_logged_once(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(images(img_a), stamp), image_msg(images(img_b), stamp))
     values, F, _ = client.wait_outputs(stamp)
-    assert F is not None and values["status"] == "ok"
+    assert F is not None and values.status == TwoViewEstimate.STATUS_OK
     health = client.latest_health(after=1.2)
     assert int(health["errors_short_data"]) >= 2
     assert int(health["errors_zero_size"]) >= 1
@@ -277,7 +283,7 @@ def test_stereo_rig_of_two_cameras_of_different_sizes(stereo):
         left, right = frame.images
         send_pair(stereo[1], image_msg(left, stamp), image_msg(right, stamp))
         values, F, cloud = stereo[1].wait_outputs(stamp)
-        assert values["status"] == "ok" and values["size_b"] == "400x300", values
+        assert values.status_text == "ok" and (values.width_b, values.height_b) == (400, 300)
         F_gt = pair_fundamental(*frame.cameras)
         pts_a = np.stack([cloud["u_a"], cloud["v_a"]], 1).astype(float)
         pts_b = np.stack([cloud["u_b"], cloud["v_b"]], 1).astype(float)
@@ -285,7 +291,7 @@ def test_stereo_rig_of_two_cameras_of_different_sizes(stereo):
         assert pos.sum() >= 100
         assert np.median(symmetric_epipolar_distance(F, pts_a[pos], pts_b[pos])) < 1.0
     health = stereo[1].latest_health(after=1.2)
-    assert int(health.get("errors_size_mismatch", 0)) == int(before.get("errors_size_mismatch", 0))
+    assert int(health.get("errors_size_change", 0)) == int(before.get("errors_size_change", 0))
 
 
 def test_failed_estimate_publishes_reason_and_no_f(stereo, images):
@@ -294,16 +300,10 @@ def test_failed_estimate_publishes_reason_and_no_f(stereo, images):
     stamp = next_stamp()
     send_pair(client, image_msg(blank, stamp), image_msg(blank, stamp))
     values, F, cloud = client.wait_outputs(stamp, need_f=False)
-    assert F is None and values["status"] != "ok" and values["_msg"] == values["status"]
-    assert values["_level"] == DiagnosticStatus.WARN
-    # a later good pair's F arrives after anything published for the blank one (one topic,
-    # in order): no F was published under the blank pair's stamp
-    good = next_stamp()
-    img_a, img_b = KITTI_STEREO[0]
-    send_pair(client, image_msg(images(img_a), good), image_msg(images(img_b), good))
-    client.wait_outputs(good)
-    with client.lock:
-        assert stamp not in client.fundamental
+    assert F is None and not values.has_f and not np.any(values.f)
+    assert values.status not in (TwoViewEstimate.STATUS_OK, TwoViewEstimate.STATUS_BAD_INPUT)
+    assert values.status_text != "ok" and values.bad_input_kind == ""
+    assert np.isnan(values.inlier_error_px) and len(cloud) == values.matches
 
 
 def test_debug_image_and_health(stereo, images):
@@ -390,16 +390,20 @@ def test_motion_templering_and_kitti_consecutive_frames(motion, images, shared_d
             if prev is not None:
                 prev_rel, prev_stamp = prev
                 if images(prev_rel).shape != images(rel).shape:
-                    # first KITTI frame after a templeRing frame: a size mismatch, skipped
-                    time.sleep(0.3)
+                    # first KITTI frame after a templeRing frame: a frame-size change, answered
+                    # with a failure record
+                    failed = client.wait_info(stamp)
+                    assert failed.status == TwoViewEstimate.STATUS_BAD_INPUT
+                    assert failed.bad_input_kind == "size_change" and not failed.has_f
+                    assert (failed.width_b, failed.height_b) == images(rel).shape[::-1]
                 else:
                     values, F, cloud = client.wait_outputs(stamp)
                     errors.append(assert_accurate(shared_data, values, F, cloud, prev_rel, rel))
-                    assert values["stamp_a"].replace(".", "") == str(prev_stamp).zfill(10)
+                    assert stamp_ns(values.stamp_a) == prev_stamp
             prev = (rel, stamp)
     assert len(errors) == len(TEMPLE_FRAMES) - 1 + len(KITTI_FRAMES) - 1
     health = client.latest_health(after=1.2)
-    assert int(health["errors_size_mismatch"]) == 1
+    assert int(health["errors_size_change"]) == 1
     # every frame's features computed once: as image b of one pair, then from the cache as
     # image a of the next (the templeRing -> KITTI pair fails on size before detection)
     n_frames = len(TEMPLE_FRAMES) + len(KITTI_FRAMES)
@@ -423,6 +427,73 @@ def test_compressed_transport_jpeg_and_png(compressed, images, shared_data):
     send_pair(client, broken, numpy_to_compressed(images(img_b), "jpeg", header(stamp)))
     health = client.latest_health(after=1.2)
     assert int(health["errors_bad_compressed"]) == 1
+
+
+def readme_consumer(topic: str) -> str:
+    """README's five-line consumer, subscribed to ``topic``."""
+    text = (REPO / "README.md").read_text()
+    block = text.split("<!-- consumer:begin -->")[1].split("<!-- consumer:end -->")[0]
+    code = block.split("```python\n")[1].split("```")[0]
+    assert len(code.strip().splitlines()) == 5, code
+    assert '"/sepfm/estimate"' in code
+    return code.replace('"/sepfm/estimate"', repr(topic))
+
+
+def consumer_answers(path) -> list[tuple[str, np.ndarray | None]]:
+    """The consumer's lines: (status text, F (3, 3) or None)."""
+    out = []
+    for line in path.read_text().splitlines():
+        status, f = line.rsplit(" ", 1) if line.endswith("None") else line.split(" [", 1)
+        out.append((status, None if f == "None" else np.array(ast.literal_eval("[" + f))))
+    return out
+
+
+def test_typed_answers_reach_a_consumer_in_another_process(stereo, tmp_path):
+    """README's consumer in its own process gets one TwoViewEstimate per pair over DDS, with F
+    as 3x3 from ``msg.f``, the F the node answered."""
+    _, client = stereo
+    script, out = tmp_path / "consumer.py", tmp_path / "consumer.out"
+    script.write_text(readme_consumer("/sepfm_stereo/estimate"))
+    frames = stereo_sequence(n_frames=8, size=(480, 360), seed=11)
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
+    with open(out, "w") as log:
+        consumer = subprocess.Popen([sys.executable, str(script)], stdout=log, stderr=log, env=env)
+    try:
+        # warm-up pairs until the consumer prints (discovery and matching take a moment)
+        for frame in frames[:5]:
+            stamp = next_stamp()
+            send_pair(client, *(image_msg(im, stamp) for im in frame.images))
+            client.wait_info(stamp)
+            deadline = time.monotonic() + 5.0
+            while not out.read_text() and time.monotonic() < deadline:
+                assert consumer.poll() is None, out.read_text()
+                time.sleep(0.05)
+            if out.read_text():
+                break
+        assert out.read_text(), "the consumer received nothing"
+        sent = []
+        for frame in frames[5:]:
+            stamp = next_stamp()
+            send_pair(client, *(image_msg(im, stamp) for im in frame.images))
+            _, F, _ = client.wait_outputs(stamp)
+            sent.append(F)
+        deadline = time.monotonic() + 20.0
+        while time.monotonic() < deadline:
+            got = [f for _, f in consumer_answers(out) if f is not None]
+            if got and np.array_equal(got[-1], sent[-1]):
+                break
+            time.sleep(0.05)
+        answers = consumer_answers(out)
+    finally:
+        consumer.terminate()
+        consumer.wait(timeout=15)
+    got = [f for _, f in answers]
+    assert all(status == "ok" for status, _ in answers[-3:]), answers
+    for F, received in zip(sent, got[-3:], strict=True):  # in order, each once, exact
+        assert received.shape == (3, 3)
+        np.testing.assert_array_equal(received, F)
+    for F in sent:
+        assert sum(f is not None and np.array_equal(f, F) for f in got) == 1
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

@@ -8,10 +8,10 @@ from types import SimpleNamespace
 
 import pytest
 
-from sepfm_ros.ros.health import ERROR, OK, WARN, Health, LogThrottle, RecentEvents
-from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
-from sepfm_ros.ros.scheduling import PairScheduler
-from sepfm_ros.ros.sync import LEFT, RIGHT
+from sepfm_ros.stream.health import ERROR, OK, WARN, Health, LogThrottle, RecentEvents
+from sepfm_ros.stream.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
+from sepfm_ros.stream.scheduling import PairScheduler
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 MS = 1_000_000
 S = 1_000_000_000

@@ -1,4 +1,4 @@
-"""The node's scheduling rules under load (sepfm_ros.ros.scheduling; no DDS).
+"""The node's scheduling rules under load (sepfm_ros.stream.scheduling; no DDS).
 
 The live consequences (latency under input at twice the processing rate, every pair answered
 when the node keeps up) are tested in test_robustness_live.py and test_node_live.py.
@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import pytest
 
-from sepfm_ros.ros.scheduling import (
+from sepfm_ros.stream.scheduling import (
     FRESH_AGE_SHARE,
     FRESHER_WAIT_SLACK_SHARE,
     RecentPeriod,

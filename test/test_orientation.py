@@ -6,10 +6,10 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.ransac import draw_samples
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.robust.samplers import draw_samples
 from sepfm_ros.geometry.solvers import seven_point
 from sepfm_ros.geometry.solvers.orientation import left_epipole, oriented_consistent
 from sepfm_ros.geometry.synthetic import make_pair

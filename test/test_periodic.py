@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
-from sepfm_ros.geometry.periodic import is_periodic, periodic_progression
+from sepfm_ros.geometry.separable.periodic import is_periodic, periodic_progression
 from sepfm_ros.geometry.synthetic import fundamental_from_cameras, look_at_camera
 
 LENGTH = 400.0  # px per unit of the line parameter t
@@ -183,26 +183,27 @@ def test_chessboard_with_matches_one_period_off_gives_no_confident_wrong_F(metho
 def test_fallback_prosac_reaches_the_whole_pool_within_the_budget_left(monkeypatch):
     # the fallback after stage 2 has less than max_samples left; PROSAC's T_N is what is left,
     # so a fallback that runs to the cap has sampled the whole pool uniformly at the end
-    from sepfm_ros.geometry import estimator
-    from sepfm_ros.geometry.correspondences import Correspondences
-    from sepfm_ros.geometry.ransac import Budget
+    from sepfm_ros.geometry.fundamental import task
+    from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+    from sepfm_ros.geometry.options import EstimatorOptions
+    from sepfm_ros.geometry.robust.loop import Budget
 
     pts1, pts2, _, _, _ = chessboard_scene(0)
-    opt = estimator.EstimatorOptions(max_samples=1000)
+    opt = EstimatorOptions(max_samples=1000)
     budget = Budget(1000)
     budget.spend(700)
-    problem = estimator._Problem(
-        Correspondences.from_pixels(pts1, pts2), "seven", "msac", 1.0, 0.99, opt,
-        np.random.default_rng(0), budget,
+    problem = task.FundamentalTask(
+        Correspondences.from_pixels(pts1, pts2), "seven", "msac", 1.0, 0.99, opt.sampler,
+        opt.local, opt.checks, np.random.default_rng(0), budget,
     )  # fmt: skip
     seen = {}
-    real = estimator.run_ransac
+    real = task.run_ransac
 
     def spy(*args, **kwargs):
         seen["growth"] = kwargs["sampling"].prosac_growth
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(estimator, "run_ransac", spy)
+    monkeypatch.setattr(task, "run_ransac", spy)
     result = problem.standard()
     assert seen["growth"] == 300
     assert budget.used <= 1000 and result.model is not None
@@ -212,7 +213,7 @@ def test_fallback_prosac_reaches_the_whole_pool_within_the_budget_left(monkeypat
 def test_nearest_within_equals_a_kd_tree(seed):
     from scipy.spatial import cKDTree
 
-    from sepfm_ros.geometry.periodic import nearest_within
+    from sepfm_ros.geometry.fundamental.shifted_plane import nearest_within
 
     rng = np.random.default_rng(seed)
     points = rng.uniform(0, 200, (300, 2))

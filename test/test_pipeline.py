@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 from ground_truth import gt_fundamental, median_gt_inlier_error
+from optional_tools import detector_param
 
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.pipeline.pipeline import MIN_MATCHES, Pipeline, PipelineConfig
@@ -147,7 +148,7 @@ def _reference_matches(pts_a, desc_a, pts_b, desc_b, features, ratio):
     return out
 
 
-@pytest.mark.parametrize("features", ["orb", "sift", "akaze"])
+@pytest.mark.parametrize("features", [detector_param(f) for f in ("orb", "sift", "akaze")])
 def test_vectorised_matching_equals_opencv_knn_matcher(shared_data, features):
     from sepfm_ros.pipeline.features import detect, make_detector, match_descriptors
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import symmetric_epipolar_distance
-from sepfm_ros.geometry.camera import camera_model, distort_points
+from sepfm_ros.geometry.calibrated.camera import camera_model, distort_points
 from sepfm_ros.geometry.synthetic import make_pair
 from sepfm_ros.pipeline.features import Matches
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig

@@ -13,12 +13,9 @@ import pytest
 from test_degeneracy import SIZE, WRONG_PX, planar_majority_pair
 
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
-from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.fundamental_problem import (
-    FundamentalProblem,
-    line_plane_basis,
-    line_plane_degenerate,
-)
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.separable.line_planes import line_plane_basis, line_plane_degenerate
+from sepfm_ros.geometry.separable.stage2 import Stage2Problem
 from sepfm_ros.geometry.synthetic import _project, look_at_camera
 
 METHODS = ("sep4", "sep5", "ransac7", "ransac8")
@@ -102,7 +99,7 @@ def test_rejected_samples_yield_no_model_and_keep_their_index():
     samples = np.array([[0, 1, 20, 21], *(rng.choice(40, 4, replace=False) for _ in range(30))])
     sids = {}
     for tol in (0.0, 2.0):
-        arm = FundamentalProblem(data, "seven", 1.0, "msac", line[0], line[1], plane_tol=tol)
+        arm = Stage2Problem(data, "seven", 1.0, "msac", line[0], line[1], plane_tol=tol)
         _, sids[tol] = arm.solve(samples)
     N = line_plane_basis(arm.f1, arm.f2)
     flagged = {b for b, smp in enumerate(samples)

@@ -12,7 +12,7 @@ import pytest
 from rclpy.serialization import deserialize_message
 from robot_bags import bag_path, write_robot_bag
 
-from sepfm_ros.geometry.pose import pose_from_projections
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.process import parse_params, run_process
 

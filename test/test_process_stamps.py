@@ -1,7 +1,7 @@
 """``process`` on bags whose header stamps are irregular, as a robot's bags can be: a repeated or
 reordered frame, a looped recording, a camera driver restarted mid-bag. The pairing is the
-node's (:mod:`sepfm_ros.ros.pairing`): a frame not after its topic's newest is skipped, a jump back
-restarts the pairing, and every pass of a looped bag is processed and read back on its own.
+node's (:mod:`sepfm_ros.stream.pairing`): a frame not after its topic's newest is skipped, a jump
+back restarts the pairing, and every pass of a looped bag is processed and read back on its own.
 """
 
 from __future__ import annotations

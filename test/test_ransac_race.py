@@ -12,9 +12,11 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
-from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.ransac import RaceOptions, ransac_trials, run_ransac
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.robust.loop import run_ransac
+from sepfm_ros.geometry.robust.options import RaceOptions
+from sepfm_ros.geometry.robust.trials import ransac_trials
 from sepfm_ros.geometry.synthetic import SyntheticPair, make_pair
 
 SCENE = make_pair(n_inliers=120, n_outliers=270, n_lines=2, noise=0.3, seed=3)

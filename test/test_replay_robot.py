@@ -22,7 +22,6 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from robot_bags import (  # noqa: E402
     LEFT_TOPIC,
     RIGHT_TOPIC,
@@ -33,8 +32,8 @@ from robot_bags import (  # noqa: E402
 from ros_helpers import RELIABLE, REPO, Ros, StampListener, start_node  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
+from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
-from sepfm_ros.ros.messages import ESTIMATE_STATUS_NAME  # noqa: E402
 from sepfm_ros.ros.replay import Replayer  # noqa: E402
 
 N_FRAMES = 4
@@ -140,11 +139,10 @@ def test_replay_loop_into_live_node_keeps_answering(small_frames, tmp_path, ros_
         "qos_overrides./right/image_raw.subscription.reliability:=reliable",
     )
 
-    def on_info(msg) -> None:
-        if any(s.name == ESTIMATE_STATUS_NAME for s in msg.status):
-            answers.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
+    def on_estimate(msg) -> None:
+        answers.append(msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec)
 
-    ros.node.create_subscription(DiagnosticArray, "/loop_target/estimate_info", on_info, RELIABLE)
+    ros.node.create_subscription(TwoViewEstimate, "/loop_target/estimate", on_estimate, RELIABLE)
     replay = None
     try:
         replay = _replay(bag, "-l", "--left", LEFT_TOPIC, "--right", RIGHT_TOPIC)

@@ -104,8 +104,9 @@ def test_process_sigkill_at_random_points_keeps_every_reported_result(tmp_path, 
         for stamp in reported:
             assert stamp in got, f"trial {trial} (kill at {delay:.2f} s): {stamp} reported, lost"
             r, ref = got[stamp], full[stamp]
-            assert r.info and r.cloud is not None
-            assert r.info["status"] == ref.info["status"]
+            assert r.estimate is not None and r.match_rows is not None
+            assert r.estimate.status == ref.estimate.status
+            assert r.estimate.status_text == ref.estimate.status_text
             if ref.F is not None:
                 np.testing.assert_array_equal(r.F, ref.F)
             kept_total += 1

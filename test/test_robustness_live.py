@@ -21,7 +21,6 @@ from robustness_report import Figures
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_helpers import (  # noqa: E402
     RELIABLE,
@@ -31,10 +30,10 @@ from ros_helpers import (  # noqa: E402
     rss_mb,
     send_pair,
     start_node,
-    status_values,
 )
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
+from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.ros.image_conversion import (  # noqa: E402
     ImageDecodeError,
     check_compressed,
@@ -331,8 +330,8 @@ def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rs
     total = int(health["errors_total"]) - int(base["errors_total"])
     with client.lock:
         infos = {s: client.info.get(s) for s in valid_stamps + deep_stamps}
-    valid_levels = [infos[s].level if infos[s] else None for s in valid_stamps]
-    deep_levels = [infos[s].level if infos[s] else None for s in deep_stamps]
+    valid_codes = [infos[s].status if infos[s] else None for s in valid_stamps]
+    deep_codes = [infos[s].status if infos[s] else None for s in deep_stamps]
     dropped = int(health["dropped_pairs"]) - int(base["dropped_pairs"])
     figures.add(
         sec,
@@ -340,7 +339,7 @@ def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rs
         malformed_by_kind=dict(sorted(kinds.items())),
         counted_by_kind=dict(sorted(counted.items())),
         valid_pairs=len(valid_stamps),
-        valid_pairs_answered=sum(lv is not None for lv in valid_levels),
+        valid_pairs_answered=sum(code is not None for code in valid_codes),
         crashes=0 if proc.proc.poll() is None else 1,
         dropped_pairs=dropped,
         rss_start_mb=round(rss0, 1),
@@ -349,10 +348,9 @@ def _check_fuzz(client, proc, kinds, valid_stamps, deep_stamps, base, health, rs
     )
     assert counted == kinds, (counted, kinds)
     assert total == sum(kinds.values())
-    assert all(lv in (DiagnosticStatus.OK, DiagnosticStatus.WARN) for lv in valid_levels), (
-        valid_levels
-    )
-    assert all(lv == DiagnosticStatus.ERROR for lv in deep_levels)
+    failed = (TwoViewEstimate.STATUS_BAD_INPUT, TwoViewEstimate.STATUS_INTERNAL_ERROR, None)
+    assert all(code not in failed for code in valid_codes), valid_codes
+    assert all(code == TwoViewEstimate.STATUS_BAD_INPUT for code in deep_codes), deep_codes
     assert dropped == 0
     # Over the whole run, from the node's state after its first pair (no warm-up exemption).
     # Without the node's memory settings (sepfm_ros/ros/memory.py: fixed malloc thresholds,
@@ -492,12 +490,14 @@ def pair_msgs(images, stamp):
 def stage_ms(client, stamps, key) -> dict[int, float]:
     """stamp -> the node's own timing ``key`` (e.g. "wait": receipt -> start of work), ms."""
     with client.lock:
-        values = {s: status_values(client.info[s]) for s in stamps if s in client.info}
-    return {s: float(v[f"ms_{key}"]) for s, v in values.items() if f"ms_{key}" in v}
+        timings = {
+            s: {t.stage: t.ms for t in client.info[s].timings} for s in stamps if s in client.info
+        }
+    return {s: t[key] for s, t in timings.items() if key in t}
 
 
 def latency_ms(client, stamps, sent_at):
-    """End-to-end latency (publish in this process -> ~/estimate_info back), ms, answered only."""
+    """End-to-end latency (publish in this process -> ~/estimate back), ms, answered only."""
     with client.lock:
         return [1e3 * (client.info_time[s] - sent_at[s]) for s in stamps if s in client.info_time]
 
@@ -542,12 +542,13 @@ def test_degenerate_geometry_gives_no_f_or_a_flagged_f(robust, figures):
         stamp = next_stamp()
         send_pair(client, *pair_msgs(images, stamp))
         values, F, _ = client.wait_outputs(stamp, need_f=False)
-        outcomes[name] = values["status"]
+        outcomes[name] = values.status_text
         if F is None:
-            assert values["status"] != "ok", name
-        else:  # published only flagged: WARN level with the reason
-            assert values["status"].startswith("degenerate"), (name, values["status"])
-            assert values["_level"] == DiagnosticStatus.WARN and values["_msg"] == values["status"]
+            assert values.status != TwoViewEstimate.STATUS_OK, name
+            assert values.status_text != "ok", name
+        else:  # published only flagged: the degenerate code with the reason
+            assert values.status == TwoViewEstimate.STATUS_DEGENERATE, (name, values.status_text)
+            assert values.status_text.startswith("degenerate"), (name, values.status_text)
     figures.add("degenerate_geometry", **outcomes)
     assert proc.proc.poll() is None
     assert "Traceback" not in proc.output()
@@ -646,15 +647,14 @@ def test_stereo_camera_stops_warns_within_2s_and_resumes(robust, frames, figures
 PEER = """
 import sys, time, rclpy
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image, PointCloud2
-from diagnostic_msgs.msg import DiagnosticArray
+from sensor_msgs.msg import Image
+from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 rclpy.init()
 node = rclpy.create_node("churn_peer")
 q = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 ns = sys.argv[1]
 subs = [node.create_subscription(t, ns + n, lambda m: None, q) for t, n in (
-    (Image, "/fundamental"), (PointCloud2, "/matches"), (DiagnosticArray, "/estimate_info"),
-    (Image, "/debug_image"))]
+    (TwoViewEstimate, "/estimate"), (MatchArray, "/matches"), (Image, "/debug_image"))]
 print("up", flush=True)
 rclpy.spin(node)
 """

@@ -7,7 +7,8 @@ import pytest
 
 from sepfm_ros.geometry import estimate_fundamental
 from sepfm_ros.geometry.epipolar import msac_kernel, sprt_msac_kernel, symmetric_epipolar_distance
-from sepfm_ros.geometry.ransac import ProsacSampler, prosac_schedule, sprt_threshold
+from sepfm_ros.geometry.robust.samplers import ProsacSampler, prosac_schedule
+from sepfm_ros.geometry.robust.sprt import sprt_threshold
 from sepfm_ros.geometry.synthetic import make_pair
 
 

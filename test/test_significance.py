@@ -1,4 +1,4 @@
-"""The a contrario significance test of the final consensus (geometry.significance).
+"""The a contrario significance test of the final consensus (geometry.fundamental.significance).
 
 Random matches always give RANSAC some consensus (the best of thousands of models); the
 estimator must say that it is one random matches give, while a real pair with few true matches
@@ -15,8 +15,8 @@ from ground_truth import manifest_pair
 
 from sepfm_ros.evaluation.metrics import run_metrics
 from sepfm_ros.geometry import METHODS, estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.significance import chance_rate, log10_nfa
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.significance import chance_rate, log10_nfa
 from sepfm_ros.geometry.synthetic import make_pair
 
 #: F of a rectified pair (pure horizontal translation): x2^T F x1 = y1 - y2, so a match's

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sepfm_ros.geometry.camera import camera_model
+from sepfm_ros.geometry.calibrated.camera import camera_model
 from sepfm_ros.pipeline.calibration import StreamCalibration
 
 K = np.array([[700.0, 0.0, 320.0], [0.0, 700.0, 240.0], [0.0, 0.0, 1.0]])

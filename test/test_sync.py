@@ -8,7 +8,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sepfm_ros.ros.messages import stamp_ns
-from sepfm_ros.ros.sync import LEFT, RIGHT, ApproximateTimeSync
+from sepfm_ros.stream.sync import LEFT, RIGHT, ApproximateTimeSync
 
 MS = 1_000_000
 PERIOD = 100 * MS  # 10 Hz camera

@@ -10,9 +10,11 @@ from ground_truth import manifest_pair
 
 from sepfm_ros.evaluation.metrics import run_metrics
 from sepfm_ros.geometry import EstimatorOptions, estimate_fundamental
-from sepfm_ros.geometry.correspondences import Correspondences
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.ransac import RaceOptions, ransac_trials, run_ransac
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.robust.loop import run_ransac
+from sepfm_ros.geometry.robust.options import RaceOptions
+from sepfm_ros.geometry.robust.trials import ransac_trials
 from sepfm_ros.geometry.synthetic import make_pair
 
 #: 120 true matches among 180: F(5, r) is about 30 samples and F(8, r) about 190

@@ -57,14 +57,6 @@ def find_bags(path: Path) -> list[Path]:
     return []
 
 
-def _size(text: str) -> tuple[int, int] | None:
-    try:
-        w, h = (int(v) for v in text.split("x"))
-    except (AttributeError, ValueError):
-        return None
-    return (w, h) if w > 0 and h > 0 else None
-
-
 def _input_bag_pairs(
     bag: Path, reader: BagReader, frames_dir: Path, topics: dict[str, str | None]
 ) -> tuple[list[PairSpec], list[PairError]]:
@@ -95,6 +87,9 @@ def _input_bag_pairs(
             errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
             continue
         pairs.append(PairSpec(pid, bag.name, F, img_a=paths[0], img_b=paths[1], kind=spec.mode))
+    if not pairs and not errors:
+        why = inputs.no_pairs_reason(spec, int(params["frame_gap"]), slop_ns, None)
+        errors.append(PairError(bag.name, bag.name, f"bag {bag}: {why}"))
     return pairs, errors
 
 
@@ -103,12 +98,14 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
     for fr in read_results(bag):
         pid = f"{bag.name}@{format_stamp(fr.stamp_ns)}{fr.run_label}"
         pts_a, pts_b = fr.pts()
-        size_a, size_b = _size(fr.info.get("size_a", "")), _size(fr.info.get("size_b", ""))
+        est = fr.estimate
+        size_a = (int(est.width_a), int(est.height_a)) if est is not None else (0, 0)
+        size_b = (int(est.width_b), int(est.height_b)) if est is not None else (0, 0)
         try:
             if fr.F_gt is None:
                 raise PairDataError(f"no {GROUND_TRUTH_TOPIC} message with this stamp")
-            if size_a is None:
-                raise PairDataError("no image size in the estimate info")
+            if min(size_a) <= 0 or min(size_b) <= 0:
+                raise PairDataError("no image size in the estimate (a failure record?)")
             F = parse_fundamental(fr.F_gt)
         except PairDataError as exc:
             errors.append(PairError(pid, bag.name, f"bag {bag}: {exc}"))
@@ -121,7 +118,7 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
                 pts_a=np.ascontiguousarray(pts_a),
                 pts_b=np.ascontiguousarray(pts_b),
                 size_a=size_a,
-                size_b=size_b or size_a,
+                size_b=size_b,
                 kind="processed",
             )
         )

@@ -8,7 +8,9 @@ writes ``docs/eval/report.md`` with tables, PNG figures and per-run CSVs, and th
 into README.md between its ``eval-table`` markers. Matches are cached in ``.cache/eval_matches``.
 Pairs that cannot be evaluated (missing image, malformed F, fewer than 8 matches, ...) are listed
 in the report with the reason; they do not stop the run. Exit code 0 when at least one pair was
-evaluated, 1 when none was, 2 on bad arguments or an unreadable manifest.
+evaluated, 1 when none was or a ``--bags`` path gave no pair (missing, unreadable, no ground
+truth, too few frames: the report is still written), 2 on bad arguments or an unreadable
+manifest.
 
 ``--bags PATH`` (repeatable) adds pairs from a bag or a folder of bags with ground truth: input
 bags (pairs as ``process`` forms them; rosbag2 sqlite3/mcap or ROS 1 ``.bag``; input topics from
@@ -91,7 +93,12 @@ def build_parser() -> argparse.ArgumentParser:
         help="folder for cached matches, keyed by image content + settings "
         "(default: .cache/eval_matches); 'none' disables caching",
     )
-    p.add_argument("--features", choices=FEATURES, default="sift", help="default: sift")
+    p.add_argument(
+        "--features",
+        choices=FEATURES,
+        default="sift",
+        help="default: sift; akaze where this OpenCV has it (OpenCV 4, OpenCV 5's contrib wheel)",
+    )
     p.add_argument("--ratio", type=float, default=0.8, help="Lowe ratio test (default: 0.8)")
     p.add_argument(
         "--max-features",
@@ -168,6 +175,7 @@ def main(argv: list[str]) -> int:
         parser.error("give --manifest and/or --bags")
     cache_dir = None if str(args.cache).lower() == "none" else args.cache
     pairs, errors, cameras = [], [], {}
+    unusable_bags: list[str] = []  # --bags that gave no pair: an error, whatever else ran
     if args.manifest is not None:
         try:
             pairs, errors = load_manifest(args.manifest, args.root)
@@ -186,6 +194,8 @@ def main(argv: list[str]) -> int:
             p, e = load_bag_pairs(bag, frames_dir, args.left, args.right, args.image)
             pairs += p
             errors += e
+            if not p:
+                unusable_bags.append(str(bag))
     pairs = select_pairs(pairs, args.scenes, args.max_pairs)
     cache = MatchesCache(cache_dir, settings)
     config = EvalConfig(args.threshold, args.confidence, tuple(args.seeds), args.baseline)
@@ -238,4 +248,11 @@ def main(argv: list[str]) -> int:
     )
     for e in res.errors:
         print(f"  {e.pair_id}: {e.message}", file=sys.stderr)
+    if unusable_bags:
+        print(
+            f"sepfm_ros eval: error: no pair from --bags {', '.join(unusable_bags)} (the reasons "
+            "are above)",
+            file=sys.stderr,
+        )
+        return 1
     return 0 if res.pairs else 1

@@ -18,8 +18,13 @@ import cv2
 import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairSpec
-from sepfm_ros.pipeline.features import FEATURES, Matches, match_images, unique_matches
-from sepfm_ros.pipeline.pipeline import detector_available
+from sepfm_ros.pipeline.features import (
+    FEATURES,
+    Matches,
+    match_images,
+    unavailable_reason,
+    unique_matches,
+)
 
 #: Bumped when the cached content or its meaning changes.
 CACHE_VERSION = 1
@@ -48,11 +53,9 @@ class MatchSettings:
             raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
         if self.max_features < 0:
             raise ValueError(f"max_features must be >= 0, got {self.max_features}")
-        if not detector_available(self.features):
-            raise ValueError(
-                f"features {self.features!r} are not available in this OpenCV build "
-                f"({cv2.__version__})"
-            )
+        reason = unavailable_reason(self.features)
+        if reason is not None:
+            raise ValueError(reason)
 
     def detector_cap(self) -> int:
         """The ``max_features`` passed to match_images."""

@@ -359,7 +359,7 @@ def pose_errors(
     epipolar distance < ``threshold``) with the GT intrinsics; the reference is the relative
     pose of the 3x4 GT cameras P_a, P_b. ``POSE_FAILURE_DEG`` for both without F or pose.
     """
-    from sepfm_ros.geometry.pose import (
+    from sepfm_ros.geometry.calibrated.pose import (
         direction_error_deg,
         pose_from_projections,
         relative_pose,

@@ -20,7 +20,7 @@ from sepfm_ros.evaluation import metrics
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec
 from sepfm_ros.evaluation.matches_cache import MatchesCache
 from sepfm_ros.evaluation.methods import Method, MethodResult
-from sepfm_ros.geometry.line_homography_fit import line_homography_error
+from sepfm_ros.geometry.separable.stage1 import line_homography_error
 
 #: Fewer putative matches than this and no compared method can run (eight-point methods).
 MIN_MATCHES = 8

@@ -20,13 +20,9 @@ from sepfm_ros.geometry.epipolar import (
     symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.estimate import Estimate, StatusCode
-from sepfm_ros.geometry.estimator import (
-    DEFAULT_METHOD,
-    METHODS,
-    EstimatorOptions,
-    estimate_fundamental,
-)
-from sepfm_ros.geometry.ransac import ransac_trials
+from sepfm_ros.geometry.estimator import DEFAULT_METHOD, METHODS, estimate_fundamental
+from sepfm_ros.geometry.options import EstimatorOptions
+from sepfm_ros.geometry.robust.trials import ransac_trials
 
 __all__ = [
     "DEFAULT_METHOD",

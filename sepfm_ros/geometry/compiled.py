@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 
 from sepfm_ros.geometry.estimator import METHODS, estimate_fundamental
-from sepfm_ros.geometry.periodic import nearest_within
+from sepfm_ros.geometry.fundamental.shifted_plane import nearest_within
 from sepfm_ros.geometry.synthetic import make_pair
 
 

@@ -69,7 +69,8 @@ class Estimate:
             1.4826 (1 + 5 / (N - p)) sqrt(median d^2); their inliers are d < 2.5 sigma. None
             for the other methods.
         log10_nfa: log10 of the number of false alarms of the final inliers (Moisan and
-            Stival's a contrario test, :mod:`sepfm_ros.geometry.significance`): below 0, a
+            Stival's a contrario test, :mod:`sepfm_ros.geometry.fundamental.significance`):
+            below 0, a
             consensus that random matches do not give. None when F had fewer than 8 inliers.
     """
 

@@ -10,7 +10,7 @@ node and offline processing.
 - :meth:`StreamCalibration.outputs` turns a result into the relative pose of camera b in camera
   a (unit translation in motion mode; metres of the calibrated baseline for a stereo rig) and,
   for a stereo rig whose P matrices give a baseline, the pair's check against the calibration
-  and the sliding-window decision (:mod:`sepfm_ros.geometry.calibration_check`).
+  and the sliding-window decision (:mod:`sepfm_ros.geometry.calibrated.calibration_check`).
 """
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sepfm_ros.geometry.calibration_check import (
+from sepfm_ros.geometry.calibrated.calibration_check import (
     CalibrationMonitor,
     CalibrationStatus,
     MonitorConfig,
@@ -27,8 +27,8 @@ from sepfm_ros.geometry.calibration_check import (
     StereoCalibration,
     check_pair,
 )
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel
-from sepfm_ros.geometry.pose import RelativePose, relative_pose
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.calibrated.pose import RelativePose, relative_pose
 from sepfm_ros.pipeline.pipeline import PipelineResult
 
 

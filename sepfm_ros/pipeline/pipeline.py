@@ -31,22 +31,28 @@ from collections import OrderedDict
 from collections.abc import Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
-from functools import cache
 from typing import Any
 
-import cv2
 import numpy as np
 
 from sepfm_ros.geometry import (
     DEFAULT_METHOD,
     METHODS,
     Estimate,
+    EstimatorOptions,
     StatusCode,
     estimate_fundamental,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.camera import CameraModel, undistort_points
-from sepfm_ros.pipeline.features import FEATURES, Matches, detect, make_detector, match_descriptors
+from sepfm_ros.geometry.calibrated.camera import CameraModel, undistort_points
+from sepfm_ros.pipeline.features import (
+    FEATURES,
+    Matches,
+    detect,
+    make_detector,
+    match_descriptors,
+    unavailable_reason,
+)
 
 # The fewest matches any estimator method accepts (eight-point needs 8).
 MIN_MATCHES = 8
@@ -68,7 +74,7 @@ class PipelineConfig:
         seed: seed of every random choice of the estimator; the same for every pair, so a pair
             of images gives the same F live and offline.
         max_matches: keep at most this many best matches for the estimator (0 = all).
-        estimator_options: extra keyword options passed to ``estimate_fundamental`` as-is.
+        estimator_options: the estimator's options (``EstimatorOptions``; default: its defaults).
     """
 
     features: str = "orb"
@@ -79,7 +85,7 @@ class PipelineConfig:
     confidence: float = 0.99
     seed: int = 0
     max_matches: int = 0
-    estimator_options: dict[str, Any] = field(default_factory=dict)
+    estimator_options: EstimatorOptions = field(default_factory=EstimatorOptions)
 
     def __post_init__(self) -> None:
         errors = config_errors(self)
@@ -92,8 +98,8 @@ def config_errors(config: PipelineConfig) -> list[str]:
     errors = []
     if config.features not in FEATURES:
         errors.append(f"features must be one of {FEATURES}, got {config.features!r}")
-    elif not detector_available(config.features):
-        errors.append(f"features {config.features!r} are not available in this OpenCV build")
+    elif (reason := unavailable_reason(config.features)) is not None:
+        errors.append(reason)
     if config.method not in METHODS:
         errors.append(f"method must be one of {METHODS}, got {config.method!r}")
     if not int(config.max_features) >= MIN_MATCHES:
@@ -109,16 +115,6 @@ def config_errors(config: PipelineConfig) -> list[str]:
     if int(config.max_matches) < 0:
         errors.append(f"max_matches must be >= 0, got {config.max_matches}")
     return errors
-
-
-@cache
-def detector_available(features: str) -> bool:
-    """True when this OpenCV build can create the ``features`` detector."""
-    try:
-        make_detector(features, 100)
-    except (AttributeError, ValueError, cv2.error):
-        return False
-    return True
 
 
 @dataclass
@@ -342,7 +338,7 @@ class Pipeline:
 
         Args:
             cameras: optional (camera of image a, camera of image b). When given, the matched
-                points are undistorted (:func:`~sepfm_ros.geometry.camera.undistort_points`,
+                points are undistorted (:func:`undistort_points`,
                 the identity for D = 0) before estimation, so F, ``matches`` and ``errors`` are
                 in undistorted pixels of K (``result.coordinates == "undistorted"``); timed as
                 stage "undistort".
@@ -440,7 +436,7 @@ def _estimate(
             threshold=cfg.threshold_px,
             confidence=cfg.confidence,
             seed=cfg.seed,
-            **cfg.estimator_options,
+            options=cfg.estimator_options,
         )
     except ValueError as err:  # the estimator's "bad input" contract
         return Estimate(

@@ -4,28 +4,27 @@ with a stream's calibration (:class:`~sepfm_ros.pipeline.calibration.StreamCalib
 Per pair: :meth:`CalibratedStream.cameras` turns the latest ``CameraInfo`` of each camera into the
 camera models the pipeline undistorts with (None without usable ones, with an ERROR calibration
 status saying why); :meth:`CalibratedStream.messages` turns the pipeline's result into the
-``~/estimate_info`` pose values, the ``~/relative_transform`` and the ``~/calibration_check``.
+pose and check (for ``~/estimate``), the ``~/relative_transform`` and the ``~/calibration_check``.
 """
 
 from __future__ import annotations
 
 import operator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TransformStamped
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import CalibrationMonitor, MonitorConfig
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel
-from sepfm_ros.pipeline.calibration import StreamCalibration
+from sepfm_ros.geometry.calibrated.calibration_check import CalibrationMonitor, MonitorConfig
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
+from sepfm_ros.pipeline.calibration import CalibratedOutputs, StreamCalibration
 from sepfm_ros.pipeline.pipeline import PipelineResult
 from sepfm_ros.ros.calibration_msgs import (
     calibration_error_status,
     calibration_status,
     camera_model_from_info,
-    pose_values,
     relative_transform,
 )
 
@@ -49,9 +48,9 @@ class CamerasUpdate:
 
 @dataclass
 class CalibratedMessages:
-    """One pair's calibrated outputs as messages (``values`` go into ``~/estimate_info``)."""
+    """One pair's calibrated outputs as messages, and the pose and check they say."""
 
-    values: dict[str, Any] = field(default_factory=dict)
+    outputs: CalibratedOutputs | None = None
     transform: TransformStamped | None = None
     status: DiagnosticStatus | None = None
 
@@ -113,19 +112,12 @@ class CalibratedStream:
     def messages(
         self, result: PipelineResult, threshold_px: float, header: Header, frames: tuple[str, str]
     ) -> CalibratedMessages:
-        """Pose values, transform and calibration status of a result estimated with the
-        cameras of :meth:`cameras` (stamped with the pair's ``header``)."""
-        out = CalibratedMessages()
+        """Pose, transform and calibration status of a result estimated with the cameras of
+        :meth:`cameras` (stamped with the pair's ``header``)."""
         outputs = self.calibration.outputs(result, threshold_px)
-        if outputs.pose is not None:
-            out.values.update(pose_values(outputs.pose, result.coordinates, outputs.scaled))
-            if outputs.pose.ok:
-                out.transform = relative_transform(outputs.pose, header, *frames)
-        if outputs.check is not None:
-            out.values["calibration_epipolar_median_px"] = outputs.check.epipolar_median_px
-            out.values["calibration_epipolar_p90_px"] = outputs.check.epipolar_p90_px
-            out.values["calibration_rotation_error_deg"] = outputs.check.rotation_error_deg
+        out = CalibratedMessages(outputs)
+        if outputs.pose is not None and outputs.pose.ok:
+            out.transform = relative_transform(outputs.pose, header, *frames)
         if outputs.status is not None:
             out.status = calibration_status(outputs.status, self.node_name, self.hardware_id)
-            out.values["calibration_level"] = outputs.status.level_name
         return out

@@ -2,7 +2,8 @@
 
 For every stereo pair in the bag, matches the images with the node's pipeline (estimated in
 undistorted pixels of K, or rectified pixels), measures the inlier matches against the
-calibration from the bag's ``camera_info`` topics (:mod:`sepfm_ros.geometry.calibration_check`)
+calibration from the bag's ``camera_info`` topics
+(:mod:`sepfm_ros.geometry.calibrated.calibration_check`)
 and runs the same sliding-window monitor as the node. Prints one line per pair and the
 decision; writes ``calibration_check.png`` (error over time) and ``calibration_check.csv`` into
 ``--out``.
@@ -28,24 +29,28 @@ from typing import Any
 
 import numpy as np
 
-from sepfm_ros.geometry.calibration_check import (
+from sepfm_ros.geometry.calibrated.calibration_check import (
     LEVEL_NAMES,
     OK,
-    CalibrationMonitor,
     CalibrationStatus,
     MonitorConfig,
     PairCheck,
-    StereoCalibration,
-    check_pair,
 )
-from sepfm_ros.geometry.camera import CalibrationError
+from sepfm_ros.geometry.calibrated.camera import CalibrationError
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
+from sepfm_ros.ros.answer import (
+    AnswerSettings,
+    PairCalibration,
+    PairHeaders,
+    answer_pair,
+    decode_pair,
+    precheck,
+)
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
-from sepfm_ros.ros.calibration_msgs import camera_model_from_info
-from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
+from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
 from sepfm_ros.ros.parameters import parameter_error
 from sepfm_ros.ros.process import (
@@ -116,32 +121,16 @@ def _monitor_config(args: argparse.Namespace) -> MonitorConfig:
 
 
 class _Rig:
-    """The latest calibration of each side, rebuilt when a camera_info changes."""
+    """The rig's calibration (the node's :class:`CalibratedStream`, whose monitor decides) and
+    the latest camera_info of each side."""
 
-    def __init__(self, rectified: bool) -> None:
-        self.rectified = rectified
+    def __init__(self, rectified: bool, monitor: MonitorConfig) -> None:
+        self.stream = CalibratedStream(True, rectified, monitor, "calibration_check")
         self.infos: dict[str, Any] = {}
-        self._key: tuple | None = None
-        self.calib: StereoCalibration | None = None
 
-    def calibration(self, size_l: tuple[int, int], size_r: tuple[int, int]) -> StereoCalibration:
-        """The rig's calibration for images of (width, height) ``size_l`` and ``size_r``."""
-        left, right = self.infos.get("left"), self.infos.get("right")
-        if left is None or right is None:
-            raise CalibrationError(
-                "no camera_info received yet for " + ("left" if left is None else "right")
-            )
-        key = tuple(
-            (tuple(np.ravel(m.k)), tuple(np.ravel(m.d)), tuple(np.ravel(m.r)), tuple(np.ravel(m.p)))
-            for m in (left, right)
-        ) + (size_l, size_r)
-        if key != self._key:
-            ma = camera_model_from_info(left, size_l)
-            mb = camera_model_from_info(right, size_r)
-            self.calib = StereoCalibration.from_models(ma, mb, self.rectified)
-            self._key = key
-        assert self.calib is not None
-        return self.calib
+    def calibration(self) -> PairCalibration:
+        """The calibration input of the next pair (both sides' camera_info known)."""
+        return PairCalibration(self.stream, [self.infos["left"], self.infos["right"]])
 
 
 def run_check(
@@ -156,14 +145,13 @@ def run_check(
         if error:
             raise ValueError(f"--sync-slop: {error}")
         params["sync_slop_s"] = args.sync_slop
-    monitor = CalibrationMonitor(_monitor_config(args))
     pipeline = Pipeline(PipelineConfig())
     rows: list[PairRow] = []
     with BagReader(args.bag) as reader:
         spec = detect_inputs(reader, "stereo", args.left, args.right)
         left, right = spec.topics
-        left_info = args.left_info or camera_info_topic(left)
-        right_info = args.right_info or camera_info_topic(right)
+        left_info = reader.resolve(args.left_info or camera_info_topic(left))
+        right_info = reader.resolve(args.right_info or camera_info_topic(right))
         rectified = args.rectified == "yes" or args.rectified == "auto" and spec.rectified()
         for topic in (left_info, right_info):
             if topic not in reader.topics:
@@ -181,13 +169,10 @@ def run_check(
         slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
         total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
         if total == 0:
-            raise BagError(
-                f"no stereo pairs: no {left} image has a {right} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set --sync-slop)"
-            )
+            raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "--sync-slop"))
         if args.max_pairs:
             total = min(total, args.max_pairs)
-        rig = _Rig(rectified)
+        rig = _Rig(rectified, _monitor_config(args))
         print(
             f"checking {total} stereo pairs of {args.bag} ({left} + {right}"
             + (", picked from the bag's image topics" if spec.picked else "")
@@ -207,14 +192,14 @@ def run_check(
                 msg = reader.deserialize(raw)
                 if raw.topic in sides:
                     rig.infos[sides[raw.topic]] = msg
-                else:
+                elif precheck(msg) is None:  # as the node: unusable fields are never paired
                     yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
         def check_ready() -> None:
             """Check the complete pairs once both camera_infos are known."""
             while ready and len(rig.infos) == 2 and len(rows) < total:
                 stamp, msg_l, msg_r = ready.pop(0)
-                row = _check_one(rig, pipeline, monitor, stamp, msg_l, msg_r, len(rows), out)
+                row = _check_one(rig, pipeline, stamp, msg_l, msg_r, len(rows), out)
                 if row is not None:
                     rows.append(row)
                     print(_row_line(row, total), file=out, flush=True)
@@ -236,32 +221,33 @@ def run_check(
 def _check_one(
     rig: _Rig,
     pipeline: Pipeline,
-    monitor: CalibrationMonitor,
     stamp: int,
     msg_l: Any,
     msg_r: Any,
     index: int,
     out,
 ) -> PairRow | None:
-    """Check one stereo pair; None (with a printed reason) when its images cannot be decoded."""
-    try:
-        img_l, img_r = pair_to_numpy(msg_l, msg_r, "mono8")  # one contrast for the pair
-    except ImageDecodeError as err:
-        print(f"pair at {format_stamp(stamp)}: skipped, {err}", file=out)
+    """Check one stereo pair through the node's answer path
+    (:func:`~sepfm_ros.ros.answer.answer_pair`); None (with a printed reason) when the pair's
+    answer is a failure record (its images cannot be decoded).
+
+    Raises:
+        CalibrationError: the camera_info cannot calibrate these images or gives no rig.
+    """
+    headers = PairHeaders(msg_l.header, msg_l.header, msg_r.header)
+    decoded = decode_pair(msg_l, msg_r, stereo=True)
+    settings = AnswerSettings.of(pipeline.config, publish_unreliable=True)
+    answer = answer_pair(pipeline, headers, decoded, settings, calibration=rig.calibration())
+    if answer.result is None:
+        print(f"pair at {format_stamp(stamp)}: skipped, {answer.estimate.status_text}", file=out)
         return None
-    calib = rig.calibration(
-        (int(img_l.shape[1]), int(img_l.shape[0])), (int(img_r.shape[1]), int(img_r.shape[0]))
-    )
-    result = pipeline.process(img_l, img_r, cameras=(calib.model_a, calib.model_b))
-    check = check_pair(
-        calib,
-        result.matches.pts_a,
-        result.matches.pts_b,
-        result.estimate.inliers,
-        monitor.config.min_inliers,
-        pipeline.config.threshold_px,
-    )
-    return PairRow(index, stamp, check, monitor.update(check))
+    update = answer.cameras_update
+    if update is not None and update.error is not None:
+        raise CalibrationError(update.reason)
+    calibrated = answer.calibrated
+    if calibrated is None or calibrated.check is None or calibrated.status is None:
+        raise CalibrationError(rig.stream.calibration.rig_problem or "no calibrated stereo rig")
+    return PairRow(index, stamp, calibrated.check, calibrated.status)
 
 
 def _row_line(row: PairRow, total: int) -> str:

@@ -1,10 +1,10 @@
 """ROS messages of calibrated estimation: CameraInfo in, pose and calibration check out.
 
 - :func:`camera_model_from_info`: ``sensor_msgs/CameraInfo`` (rclpy or rosbags message) ->
-  validated :class:`~sepfm_ros.geometry.camera.CameraModel` (CalibrationError with the reason).
+  validated :class:`~sepfm_ros.geometry.calibrated.camera.CameraModel` (CalibrationError with
+  the reason).
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
-- :func:`pose_values`: the same pose as ``~/estimate_info`` key/values.
 - :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``.
 """
 
@@ -12,15 +12,14 @@ from __future__ import annotations
 
 from typing import Any
 
-import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import CalibrationStatus
-from sepfm_ros.geometry.camera import CalibrationError, CameraModel, camera_model
-from sepfm_ros.geometry.pose import RelativePose, pose_of_b_in_a
+from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
+from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
 from sepfm_ros.ros.messages import copy_header, health_status
 
 CALIBRATION_STATUS_SUFFIX = ": calibration"
@@ -72,29 +71,6 @@ def relative_transform(
             rotation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
         ),
     )
-
-
-def pose_values(pose: RelativePose, coordinates: str, scaled: bool) -> dict[str, Any]:
-    """Key/values of a relative pose for ``~/estimate_info``.
-
-    Keys: ``coordinates`` (pixels F uses: "image" or "undistorted"), ``pose_status``,
-    ``rotation_deg``, ``translation_direction`` ("x y z" of b's position in a's frame, unit),
-    ``translation_scale`` ("baseline_m" or "unit"), ``baseline_m`` when scaled,
-    ``inliers_in_front``.
-    """
-    values: dict[str, Any] = {"coordinates": coordinates, "pose_status": pose.status}
-    if not pose.ok:
-        return values
-    _, p_ba = pose_of_b_in_a(pose.R, pose.t)
-    n = float(np.linalg.norm(p_ba))
-    direction = p_ba / n if n > 0 else p_ba
-    values["rotation_deg"] = pose.rotation_deg
-    values["translation_direction"] = " ".join(f"{v:.6f}" for v in direction)
-    values["translation_scale"] = "baseline_m" if scaled else "unit"
-    if scaled:
-        values["baseline_m"] = n
-    values["inliers_in_front"] = pose.in_front
-    return values
 
 
 def calibration_status(

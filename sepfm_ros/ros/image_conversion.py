@@ -2,7 +2,8 @@
 
 The encoding table and colour conversions come from ``rosbags-image`` (pure Python, OpenCV).
 It targets rosbags' own message classes and reads the data buffer as if rows were unpadded, so
-this module adds what it lacks: row padding (``step``), validation with clear errors, and the
+this module adds what it lacks: row padding (``step``; ``step`` 0 read as packed rows when the
+data length agrees, as cv_bridge does), validation with clear errors, and the
 mapping of deeper pixels to 8 bits. Messages are read by field access only (``height``,
 ``width``, ``encoding``, ``is_bigendian``, ``step``, ``data``; ``format`` and ``data`` for
 compressed), so rclpy messages and rosbags messages both work.
@@ -21,7 +22,8 @@ Pixels deeper than 8 bits (16-bit, signed, float) become 8 bits by one linear ma
 the range of the one image; :func:`pair_to_numpy` takes it over both images of a pair, so the
 two keep their relative brightness (a camera's auto exposure or one bright spot does not give
 the pair two contrasts). Compressed: jpeg and png (what image_transport's compressed plugin
-sends, 16-bit png included), decoded by OpenCV.
+sends, 16-bit png included), decoded by OpenCV, and qoi, which OpenCV does not read, decoded by
+Pillow; other formats are named in the error.
 
 Validation is split so a node can reject most bad messages cheaply on arrival:
 :func:`check_image` / :func:`check_compressed` look at fields and a few bytes only; what needs
@@ -31,6 +33,7 @@ decoding.
 
 from __future__ import annotations
 
+import io
 import sys
 from typing import Any
 
@@ -70,6 +73,17 @@ _JPEG_SOI = b"\xff\xd8\xff"
 _JPEG_EOI = b"\xff\xd9"
 _PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 _PNG_IEND = b"IEND"
+_QOI_MAGIC = b"qoif"
+_QOI_END = b"\x00" * 7 + b"\x01"
+# formats named in the error for compressed data that is not decoded
+_OTHER_MAGICS = (
+    (b"II*\x00", "tiff"),
+    (b"MM\x00*", "tiff"),
+    (b"BM", "bmp"),
+    (b"GIF8", "gif"),
+    (b"\x00\x00\x00\x0cjP  ", "jpeg 2000"),
+    (b"\xff\x4f\xff\x51", "jpeg 2000"),
+)
 # End markers must lie within this many bytes of the end (encoders may pad a little).
 _END_MARKER_WINDOW = 64
 
@@ -111,8 +125,60 @@ def _data_rows(encoding: str, height: int) -> int:
     return height * 3 // 2 if encoding in _YUV420 else height
 
 
+def row_stride(msg: Any, dtype: np.dtype, nchan: int) -> int:
+    """Bytes per data row of a sensor_msgs/Image: ``step``, or packed rows for ``step`` 0.
+
+    Some drivers leave ``step`` 0; cv_bridge and OpenCV then read the rows as packed
+    (width x channels x bytes per channel). That reading is taken only when the data length is
+    exactly that of packed rows; otherwise ``step`` 0 stays and :func:`check_image` reports it.
+    """
+    step = int(msg.step)
+    if step != 0:
+        return step
+    packed = int(msg.width) * nchan * dtype.itemsize
+    rows = _data_rows(msg.encoding, int(msg.height))
+    return packed if packed > 0 and memoryview(msg.data).nbytes == packed * rows else 0
+
+
+def zero_step_note(msg: Any) -> str | None:
+    """The warning to give once per topic when ``msg`` is read with packed rows for ``step``
+    0 (see :func:`row_stride`); None for an image with a step, or one that is rejected."""
+    if is_compressed(msg) or int(msg.step) != 0:
+        return None
+    try:
+        dtype, nchan = check_image(msg)
+    except ImageDecodeError:
+        return None
+    packed = row_stride(msg, dtype, nchan)
+    return (
+        f"{msg.encoding} images have step 0: read as packed rows of {packed} B "
+        f"({msg.width} px x {nchan * dtype.itemsize} B), as cv_bridge and OpenCV do, since the "
+        "data length agrees"
+    )
+
+
+class ZeroStepNotes:
+    """:func:`zero_step_note` once per topic (a stream of step-0 images warns once, not per
+    frame)."""
+
+    def __init__(self) -> None:
+        self._seen: set[str] = set()
+
+    def note(self, topic: str, msg: Any) -> str | None:
+        """``topic: <note>`` the first time ``topic`` brings a step-0 image read as packed."""
+        if topic in self._seen:
+            return None
+        text = zero_step_note(msg)
+        if text is None:
+            return None
+        self._seen.add(topic)
+        return f"{topic}: {text}"
+
+
 def check_image(msg: Any) -> tuple[np.dtype, int]:
     """Validate a sensor_msgs/Image without touching its pixels; return (dtype, channels).
+
+    ``step`` 0 with data of exactly packed rows reads as packed rows (:func:`row_stride`).
 
     Raises:
         ImageDecodeError: zero width/height (``zero_size``), odd width/height of a 4:2:0 image
@@ -121,7 +187,7 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
             claim and the data disagree), or an unsupported encoding (``unknown_encoding``).
             Rows are the height, or 1.5 x the height for nv12 / nv21.
     """
-    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    height, width = int(msg.height), int(msg.width)
     dtype, nchan = pixel_layout(msg.encoding)
     if height <= 0 or width <= 0:
         raise ImageDecodeError("zero_size", f"image has zero size ({width}x{height})")
@@ -129,15 +195,22 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
         raise ImageDecodeError(
             "odd_size", f"{msg.encoding} needs an even width and height, got {width}x{height}"
         )
+    step = row_stride(msg, dtype, nchan)
     row_bytes = width * nchan * dtype.itemsize
+    rows = _data_rows(msg.encoding, height)
+    size = memoryview(msg.data).nbytes
     if step < row_bytes:
+        packed = " (step 0 reads as packed rows only when the data length agrees)"
         raise ImageDecodeError(
             "bad_step",
             f"step {step} is smaller than a row of {width} px x {nchan * dtype.itemsize} B"
-            f" = {row_bytes} B ({msg.encoding})",
+            f" = {row_bytes} B ({msg.encoding})"
+            + (
+                f"{packed}: data has {size} B, packed rows {row_bytes * rows} B"
+                if step == 0
+                else ""
+            ),
         )
-    rows = _data_rows(msg.encoding, height)
-    size = memoryview(msg.data).nbytes
     what = f"step x rows = {step} x {rows} = {step * rows} B"
     if msg.encoding in _YUV420:
         what += f" ({msg.encoding}: 1.5 rows of data per image row)"
@@ -148,35 +221,56 @@ def check_image(msg: Any) -> tuple[np.dtype, int]:
     return dtype, nchan
 
 
+def _named_format(head: bytes) -> str | None:
+    """The image format the first bytes of compressed data announce (None: not recognised)."""
+    if head.startswith(b"RIFF") and head[8:12] == b"WEBP":
+        return "webp"
+    for magic, name in _OTHER_MAGICS:
+        if head.startswith(magic):
+            return name
+    return None
+
+
 def check_compressed(msg: Any) -> None:
     """Validate a sensor_msgs/CompressedImage from its first and last bytes (no decoding).
 
     Raises:
-        ImageDecodeError: no data (``zero_size``), data that is neither jpeg nor png
-            (``bad_compressed``), or jpeg/png data without its end marker
-            (``truncated_compressed``).
+        ImageDecodeError: no data (``zero_size``), data that is neither jpeg, png nor qoi
+            (``bad_compressed``, naming the format when its first bytes tell it), or jpeg / png /
+            qoi data without its end marker (``truncated_compressed``).
     """
     data = memoryview(msg.data).cast("B")
     n = data.nbytes
     if n == 0:
         raise ImageDecodeError("zero_size", f"compressed image ({msg.format!r}) has no data")
-    head = bytes(data[:8])
+    head = bytes(data[:12])
     tail = bytes(data[max(0, n - _END_MARKER_WINDOW) :])
     if head.startswith(_JPEG_SOI):
         if _JPEG_EOI not in tail:
             raise ImageDecodeError(
                 "truncated_compressed", f"jpeg data of {n} B has no end marker (truncated)"
             )
-    elif head == _PNG_SIGNATURE:
+    elif head.startswith(_PNG_SIGNATURE):
         if _PNG_IEND not in tail:
             raise ImageDecodeError(
                 "truncated_compressed", f"png data of {n} B has no IEND chunk (truncated)"
             )
+    elif head.startswith(_QOI_MAGIC):
+        if not tail.endswith(_QOI_END):
+            raise ImageDecodeError(
+                "truncated_compressed", f"qoi data of {n} B has no end marker (truncated)"
+            )
     else:
+        named = _named_format(head)
+        what = (
+            f"{named} data"
+            if named
+            else f"neither jpeg, png nor qoi (first bytes {head[:4].hex()})"
+        )
         raise ImageDecodeError(
             "bad_compressed",
-            f"{n} B of compressed image ({msg.format!r}) are neither jpeg nor png "
-            f"(first bytes {head[:4].hex()})",
+            f"{n} B of compressed image ({msg.format!r}) are {what}"
+            + ("; jpeg, png and qoi are decoded" if named else ""),
         )
 
 
@@ -185,14 +279,14 @@ def image_to_array(msg: Any) -> np.ndarray:
 
     nv12 / nv21 give the (1.5 H, W) uint8 planes (Y, then interleaved chroma) that OpenCV's
     ``COLOR_YUV2*_NV12`` conversions read. Honours row padding (``step`` >= width x bytes per
-    pixel) and ``is_bigendian``. The result may be a view of ``msg.data`` (no copy) when no byte
-    swap is needed.
+    pixel; ``step`` 0 as packed rows, see :func:`row_stride`) and ``is_bigendian``. The result
+    may be a view of ``msg.data`` (no copy) when no byte swap is needed.
 
     Raises:
         ImageDecodeError: see :func:`check_image`.
     """
     dtype, nchan = check_image(msg)
-    height, width, step = int(msg.height), int(msg.width), int(msg.step)
+    height, width, step = int(msg.height), int(msg.width), row_stride(msg, dtype, nchan)
     rows = _data_rows(msg.encoding, height)
     row_bytes = width * nchan * dtype.itemsize
     data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
@@ -291,6 +385,8 @@ def _decode_compressed(msg: Any, color_space: str) -> tuple[np.ndarray, str]:
     """A CompressedImage -> (pixels, encoding of the pixels); 16-bit png keeps its depth."""
     check_compressed(msg)
     data = np.frombuffer(memoryview(msg.data).cast("B"), dtype=np.uint8)
+    if bytes(data[:4]) == _QOI_MAGIC:
+        return _decode_qoi(data, msg.format)
     flag = cv2.IMREAD_GRAYSCALE if color_space == "mono8" else cv2.IMREAD_COLOR
     if "16" in str(msg.format) or "png" in str(msg.format).lower():
         flag = cv2.IMREAD_UNCHANGED  # keep 16-bit png depth; mapped to 8 bits by the caller
@@ -302,6 +398,24 @@ def _decode_compressed(msg: Any, color_space: str) -> tuple[np.ndarray, str]:
     nchan = 1 if img.ndim == 2 else img.shape[2]
     depth = "16" if img.dtype == np.uint16 else "8"
     return img, {1: "mono", 3: "bgr", 4: "bgra"}[nchan] + depth
+
+
+def _decode_qoi(data: np.ndarray, fmt: str) -> tuple[np.ndarray, str]:
+    """QOI data (which OpenCV does not read) -> (H, W, 3|4) uint8 pixels and rgb8 / rgba8, by
+    Pillow's QOI reader."""
+    from PIL import Image as PilImage
+
+    try:
+        with PilImage.open(io.BytesIO(data.tobytes()), formats=["QOI"]) as img:
+            img.load()
+            pixels = np.asarray(img)
+    except (OSError, ValueError, SyntaxError) as err:
+        raise ImageDecodeError(
+            "bad_compressed", f"cannot decode {data.size} B of qoi data ({fmt!r}): {err}"
+        ) from None
+    if pixels.ndim != 3 or pixels.shape[2] not in (3, 4) or pixels.size == 0:
+        raise ImageDecodeError("bad_compressed", f"qoi data ({fmt!r}) gave {pixels.shape} pixels")
+    return pixels, "rgb8" if pixels.shape[2] == 3 else "rgba8"
 
 
 def _decode(msg: Any, color_space: str) -> tuple[np.ndarray, str]:

@@ -15,7 +15,7 @@ holds a ``sensor_msgs/CameraInfo`` per camera next to its images (``/left/camera
 ``/right/camera_info``, ``/camera_info``; same stamp and frame id as the image, see
 :func:`camera_infos`) and ``/ground_truth/fundamental``: sensor_msgs/Image 64FC1 3x3 row-major
 F with ``x_b^T F x_a = 0`` (a = left or previous frame, b = right or current frame), stamped like
-the node's ``~/fundamental`` (the left image's stamp in stereo, the current frame's in motion).
+the node's ``~/estimate`` (the left image's stamp in stereo, the current frame's in motion).
 Stamps are ``--start-time`` + k / ``--rate``, message log times equal the stamps.
 """
 

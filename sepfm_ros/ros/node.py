@@ -1,4 +1,4 @@
-"""The live two-view geometry node ``sepfm``: images in, F, matches and diagnostics out.
+"""The live two-view geometry node ``sepfm``: images in, typed estimates and matches out.
 
 Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-args ...``).
 
@@ -6,11 +6,11 @@ This module wires the parts together; each lives in its own module:
 
 - :mod:`sepfm_ros.ros.parameters`: the parameters, their validation and the pipeline config;
 - :mod:`sepfm_ros.ros.subscriptions`: the image topics (remaps, ``compressed``) and their QoS;
-- :mod:`sepfm_ros.ros.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
+- :mod:`sepfm_ros.stream.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
   reset when stamps jump back;
-- :mod:`sepfm_ros.ros.scheduling`: the latest-only slots between the executor and the two
+- :mod:`sepfm_ros.stream.scheduling`: the latest-only slots between the executor and the two
   worker threads, and the policy when pairs come faster than the node processes them;
-- :mod:`sepfm_ros.ros.health`: counters, recent problems and the ``/diagnostics`` level.
+- :mod:`sepfm_ros.stream.health`: counters, recent problems and the ``/diagnostics`` level.
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair frames and offer the pair to the scheduler. Two worker threads then run the
@@ -39,24 +39,32 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibration_check import MonitorConfig
-from sepfm_ros.geometry.camera import CameraModel
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
     Pipeline,
     PipelineConfig,
     name_native_thread,
 )
-from sepfm_ros.ros.calibrated import CalibratedStream
+from sepfm_ros.ros.answer import (
+    AnswerSettings,
+    BadInput,
+    PairAnswer,
+    PairCalibration,
+    PairHeaders,
+    add_timings,
+    answer_matched,
+    decode_pair,
+    failure_answer,
+    internal_error_answer,
+    internal_error_kind,
+    internal_error_text,
+    precheck,
+)
+from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
-from sepfm_ros.ros.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
-from sepfm_ros.ros.image_conversion import (
-    ImageDecodeError,
-    check_compressed,
-    check_image,
-    pair_to_numpy,
-)
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.memory import (
     release_free_memory,
 )
@@ -65,8 +73,7 @@ from sepfm_ros.ros.messages import (
     health_status,
     stamp_ns,
 )
-from sepfm_ros.ros.outputs import Answer, NodeOutputs
-from sepfm_ros.ros.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
+from sepfm_ros.ros.outputs import NodeOutputs
 from sepfm_ros.ros.parameters import (
     NODE_NAME,
     PARAMS,
@@ -76,9 +83,11 @@ from sepfm_ros.ros.parameters import (
     parameter_error,
     pipeline_config,
 )
-from sepfm_ros.ros.scheduling import PairScheduler
 from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
-from sepfm_ros.ros.sync import LEFT, RIGHT
+from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
+from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
+from sepfm_ros.stream.scheduling import PairScheduler
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 # A recurring problem of one kind is logged at most once per this many seconds.
@@ -95,6 +104,10 @@ class Job:
     header: Header  # header of the newer image (copied to every output)
     key_a: Any
     key_b: Any
+
+    def headers(self) -> PairHeaders:
+        """The pair's output header and its images' headers."""
+        return PairHeaders(self.header, self.msg_a.header, self.msg_b.header)
 
 
 @dataclass
@@ -143,6 +156,7 @@ class SepfmNode(Node):
             raise ValueError("invalid parameters: " + "; ".join(errors))
         self._mode = values["mode"]
         self._transport = values["transport"]
+        self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
         self._pending_config: PipelineConfig | None = None
@@ -161,7 +175,6 @@ class SepfmNode(Node):
         self._health = Health(names, float(values["input_timeout_s"]))
         self._throttle = LogThrottle(LOG_THROTTLE_S)
         self._reported_stall: str | None = None
-        self._threshold_px = float(values["threshold_px"])
         self._pending_monitor: MonitorConfig | None = None
 
         self._out = NodeOutputs(self)
@@ -246,7 +259,6 @@ class SepfmNode(Node):
             self._pending_config = config
             self._epipolar_lines = int(values["debug_epipolar_lines"])
             self._publish_unreliable = bool(values["publish_unreliable"])
-            self._threshold_px = float(values["threshold_px"])
             self._pending_monitor = monitor_config(values)
             self._health.input_timeout_s = float(values["input_timeout_s"])
             self._stereo.configure(
@@ -302,14 +314,12 @@ class SepfmNode(Node):
 
     def _precheck(self, msg: Any, topic: str) -> bool:
         """Cheap field validation in the callback (no pixel access); False when skipped."""
-        try:
-            if self._transport == "raw":
-                check_image(msg)
-            else:
-                check_compressed(msg)
-        except ImageDecodeError as err:
-            self._bad_input(err.kind, f"{topic}: {err}")
+        bad = precheck(msg)
+        if bad is not None:
+            self._bad_input(bad.kind, f"{topic}: {bad.text}")
             return False
+        if getattr(msg, "step", None) == 0 and (note := self._zero_step.note(topic, msg)):
+            self.get_logger().warning(note)
         return True
 
     def _offer(self, job: Job) -> None:
@@ -394,12 +404,12 @@ class SepfmNode(Node):
             t0 = time.monotonic()
             try:
                 matched = self._match(job)
-            except ImageDecodeError as err:
-                self._bad_input(err.kind, str(err))
-                self._publish_failure(job, err.kind, str(err))
-                continue
-            except Exception as err:  # keep serving; count and log
+            except Exception as err:  # keep serving; count, log and answer
                 self._internal_error(job, err)
+                continue
+            if isinstance(matched, BadInput):
+                self._bad_input(matched.kind, matched.text)
+                self._publish_answer(failure_answer(job.headers(), matched, self._settings()))
                 continue
             self._scheduler.put_matched(matched, time.monotonic() - t0)
 
@@ -418,52 +428,52 @@ class SepfmNode(Node):
             self._scheduler.estimate_done(t0)
 
     def _internal_error(self, job: Job, err: Exception) -> None:
-        kind = f"internal_{type(err).__name__}"
-        self._bad_input(kind, "".join(traceback.format_exception(err)))
-        self._publish_failure(job, kind, f"{type(err).__name__}: {err}")
+        """Count and log an unexpected error of a pair and answer it (STATUS_INTERNAL_ERROR)."""
+        self._bad_input(internal_error_kind(err), internal_error_text(err))
+        self._publish_answer(internal_error_answer(job.headers(), err, self._settings()))
 
-    def _publish_failure(self, job: Job, kind: str, reason: str) -> None:
-        """Answer a pair that could not be processed on ~/estimate_info (ERROR level)."""
+    def _publish_answer(self, answer: PairAnswer, item: MatchedJob | None = None) -> None:
+        """Publish a pair's messages; a failure here (e.g. shutting down) never kills the worker."""
         try:
-            stamps = job.msg_a.header.stamp, job.msg_b.header.stamp
-            self._out.failure(job.header, *stamps, reason, kind, self._pipeline.config)
-        except Exception as err:  # noqa: BLE001 - e.g. shutting down; never kill the worker
-            self._bad_input(f"internal_{type(err).__name__}", f"cannot publish a failure: {err}")
+            images = None if item is None else item.images
+            self._out.answer(answer, images, self._epipolar_lines)
+        except Exception as err:  # noqa: BLE001 - keep serving
+            self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
-    def _match(self, job: Job) -> MatchedJob:
+    def _settings(self, config: PipelineConfig | None = None) -> AnswerSettings:
+        with self._lock:
+            publish_unreliable = self._publish_unreliable
+        return AnswerSettings.of(config or self._pipeline.config, publish_unreliable)
+
+    def _match(self, job: Job) -> MatchedJob | BadInput:
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
-        t0 = time.perf_counter()
-        image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
-        decode_ms = (time.perf_counter() - t0) * 1e3
-        if self._mode == "motion" and image_a.shape != image_b.shape:
-            # one camera whose resolution changed: the two frames are not one camera's views
-            # (a stereo rig's two cameras may differ: F relates any two)
-            raise ImageDecodeError(
-                "size_mismatch",
-                f"the camera's frame size changed from {image_a.shape[1::-1]} to "
-                f"{image_b.shape[1::-1]}",
-            )
+        decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
+        if isinstance(decoded, BadInput):
+            return decoded
         matched = self._pipeline.match(
-            image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
+            *decoded.images, job.key_a, job.key_b, prior_timings_ms={"decode": decoded.decode_ms}
         )
-        return MatchedJob(job, matched, (image_a, image_b), wait_ms, time.monotonic())
+        return MatchedJob(job, matched, decoded.images, wait_ms, time.monotonic())
 
-    def _cameras(self, item: MatchedJob) -> tuple[CameraModel, CameraModel] | None:
-        """The camera models of the pair's images from the latest camera_info (None without
-        usable ones: the pair is estimated in image pixels). Estimate thread."""
+    def _calibration(self) -> PairCalibration | None:
+        """The stream's calibration and the latest camera_info (None without camera_info
+        input: the pair is estimated in image pixels). Estimate thread."""
         with self._lock:
             pending, self._pending_monitor = self._pending_monitor, None
         if pending is not None:
             self._calibrated.configure_monitor(pending)
-        infos = None if self._camera_info is None else self._camera_info.latest()
-        update = self._calibrated.cameras(infos, [im.shape[1::-1] for im in item.images])
+        if self._camera_info is None:
+            return None
+        return PairCalibration(self._calibrated, self._camera_info.latest())
+
+    def _log_cameras(self, update: CamerasUpdate | None) -> None:
+        """Count and log unusable camera_info; log a calibration newly in use."""
+        if update is None:
+            return
         if update.error is not None:
             self._health.problem("camera_info_invalid")
             self._log_throttled("camera_info_invalid", f"camera_info unusable: {update.reason}")
-            with self._lock:
-                self._calib_status = update.error
-            self._out.calibration.publish(update.error)
         elif update.changed:
             calibration = self._calibrated.calibration
             self.get_logger().info(
@@ -476,44 +486,27 @@ class SepfmNode(Node):
                 )
                 + ("" if calibration.rig is None else ", stereo calibration check on")
             )
-        return update.cameras
 
     def _estimate_and_publish(self, item: MatchedJob) -> None:
         job = item.job
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
-        cameras = self._cameras(item)
-        result = self._pipeline.estimate(item.matched, cameras)
-        with self._lock:
-            publish_unreliable = self._publish_unreliable
-            n_lines = self._epipolar_lines
-            threshold_px = self._threshold_px
-        values: dict[str, Any] = {}
-        if cameras is not None:
-            t0 = time.perf_counter()
-            frames = self._calibrated.frames(job.msg_a.header.frame_id, job.msg_b.header.frame_id)
-            calibrated = self._calibrated.messages(result, threshold_px, job.header, frames)
-            values = calibrated.values
-            if calibrated.status is not None:
-                with self._lock:
-                    self._calib_status = calibrated.status
-            self._out.calibrated(calibrated)
-            result.timings_ms["pose"] = (time.perf_counter() - t0) * 1e3
-        published = result.estimate.F is not None and (result.ok or publish_unreliable)
-        latency_ms = (time.monotonic() - job.received) * 1e3
-        answer = Answer(
-            result,
-            job.header,
-            job.msg_a.header.stamp,
-            job.msg_b.header.stamp,
-            item.matched.config.features,
-            published,
-            {"wait": item.wait_ms, "queue": queue_ms, "latency": latency_ms},
-            values,
-            item.images,
-            n_lines,
+        answer = answer_matched(
+            self._pipeline,
+            job.headers(),
+            item.matched,
+            self._settings(item.matched.config),
+            self._calibration(),
+            {"wait": item.wait_ms, "queue": queue_ms},
         )
-        self._out.answer(answer)
-        self._health.answered(latency_ms, item.wait_ms, published, result.ok)
+        self._log_cameras(answer.cameras_update)
+        if answer.calibration is not None:
+            with self._lock:
+                self._calib_status = answer.calibration
+        latency_ms = (time.monotonic() - job.received) * 1e3
+        add_timings(answer.estimate, {"latency": latency_ms})
+        self._out.answer(answer, item.images, self._epipolar_lines)
+        ok = answer.result is not None and answer.result.ok
+        self._health.answered(latency_ms, item.wait_ms, answer.has_f, ok)
 
     # ---------------------------------------------------------------- health
     def health(self) -> dict[str, Any]:
@@ -526,7 +519,7 @@ class SepfmNode(Node):
         for sub, name in zip(self._subs, self._health.topics, strict=True):
             values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
         values["dds_input_transport"] = self._dds.describe()
-        # subscribers matched by the result publishers (the fewest over F, matches, info) and by
+        # subscribers matched by the result publishers (the fewest over estimate and matches) and by
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())
         # motion mode: each frame detected once (its features are cached by stamp)

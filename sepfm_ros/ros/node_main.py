@@ -38,8 +38,9 @@ def limit_thread_pools(threads: int = 1) -> None:
 def _usage() -> str:
     lines = [
         "The sepfm node: subscribes to left/image_raw + right/image_raw (mode:=stereo) or",
-        "image_raw (mode:=motion), publishes ~/fundamental (64FC1 3x3 Image), ~/matches",
-        "(PointCloud2), ~/estimate_info and /diagnostics (DiagnosticArray), ~/debug_image.",
+        "image_raw (mode:=motion), publishes ~/estimate (sepfm_msgs/TwoViewEstimate, one per",
+        "pair), ~/matches (sepfm_msgs/MatchArray), /diagnostics, ~/debug_image and, with",
+        "camera_info, ~/relative_transform and ~/calibration_check.",
         "",
         "parameters:",
         parameters_help(),

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,8 +18,8 @@ from rcl_interfaces.msg import (
     ParameterType,
 )
 
-from sepfm_ros.geometry import DEFAULT_METHOD, METHODS
-from sepfm_ros.geometry.calibration_check import MonitorConfig
+from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
 
@@ -82,7 +83,12 @@ PARAMS: dict[str, ParamSpec] = {
         1e6,
     ),
     "frame_gap": ParamSpec(1, "motion: F between frame t - frame_gap and frame t", 1, 100),
-    "features": ParamSpec("orb", "feature detector/descriptor", choices=FEATURES),
+    "features": ParamSpec(
+        "orb",
+        "feature detector/descriptor (akaze where this OpenCV has it: OpenCV 4, or OpenCV 5's "
+        "contrib wheel)",
+        choices=FEATURES,
+    ),
     "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
     "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
     "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
@@ -107,7 +113,7 @@ PARAMS: dict[str, ParamSpec] = {
     "publish_unreliable": ParamSpec(
         True,
         "also publish F when the estimator flags it unreliable (status not ok, e.g. a dominant"
-        " plane); ~/estimate_info then carries the reason at WARN level",
+        " plane); ~/estimate's status then says why",
     ),
     "debug_epipolar_lines": ParamSpec(8, "epipolar lines drawn on ~/debug_image", 0, 100),
     "use_camera_info": ParamSpec(
@@ -201,9 +207,9 @@ def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
     return desc
 
 
-def parameter_error(name: str, value: Any) -> str | None:
-    """Why ``value`` is not acceptable for parameter ``name`` (None when it is)."""
-    spec = PARAMS.get(name)
+def parameter_error(name: str, value: Any, params: Mapping[str, ParamSpec] = PARAMS) -> str | None:
+    """Why ``value`` is not acceptable for parameter ``name`` of ``params`` (None when it is)."""
+    spec = params.get(name)
     if spec is None:
         return None  # not ours (e.g. use_sim_time, qos overrides)
     if spec.choices:
@@ -225,13 +231,13 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     if int(values.get("hough_width_px", 0)) > 0:
         options[HOUGH_WIDTH_OPTION] = int(values["hough_width_px"])
     kwargs = {field: values[param] for param, field in PIPELINE_PARAMS.items() if param in values}
-    return PipelineConfig(**kwargs, estimator_options=options)
+    return PipelineConfig(**kwargs, estimator_options=EstimatorOptions(**options))
 
 
-def parameters_help() -> str:
-    """One line per parameter: name, default, range or choices, description."""
+def parameters_help(params: Mapping[str, ParamSpec] = PARAMS) -> str:
+    """One line per parameter of ``params``: name, default, range or choices, description."""
     lines = []
-    for name, spec in PARAMS.items():
+    for name, spec in params.items():
         if spec.choices:
             rng = f" one of {'/'.join(spec.choices)}"
         elif isinstance(spec.default, bool):

@@ -13,9 +13,12 @@ more than ``stamp_jump_reset_s`` (a looped bag, a restarted driver) restarts the
 The command runs the node's
 :class:`~sepfm_ros.pipeline.pipeline.Pipeline` with the same parameters (``-p name:=value``,
 the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
-the node's outputs with the source stamps to OUT: ``/sepfm/fundamental``, ``/sepfm/matches``,
-``/sepfm/estimate_info`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it), logged at
-the log time of the input message that completed each pair, so OUT plays in step with BAG.
+the node's outputs with the source stamps to OUT: ``/sepfm/estimate`` (sepfm_msgs/TwoViewEstimate,
+one per pair, a failure record for a pair that cannot be used), ``/sepfm/matches``
+(sepfm_msgs/MatchArray), with camera_info ``/sepfm/relative_transform`` and
+``/sepfm/calibration_check`` (plus a copy of ``/ground_truth/fundamental`` when BAG has it),
+logged at the log time of the input message that completed each pair, so OUT plays in step
+with BAG. The answers are the node's (:mod:`sepfm_ros.ros.answer`).
 
 A progress bar runs on stderr (``--print-done`` also prints a line ``done K/N STAMP`` on stdout for
 each pair once its results are safely in OUT, for programs that watch the progress); at the end a
@@ -24,7 +27,8 @@ scored against the ground truth when the bag has it. Every result is flushed to 
 is computed (see :class:`~sepfm_ros.ros.bags.writer.BagWriter`), so Ctrl-C, SIGTERM or even SIGKILL
 leave a readable OUT holding every result computed before the interruption.
 
-Exit codes: 0 done, 1 bad input (message on stderr, no traceback), 130 interrupted.
+Exit codes: 0 done, 1 bad input (message on stderr, no traceback: an unreadable bag, no pair to
+form, an output name of another format, no pair whose images decode), 130 interrupted.
 """
 
 from __future__ import annotations
@@ -32,9 +36,8 @@ from __future__ import annotations
 import argparse
 import bisect
 import sys
-import time
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -45,34 +48,45 @@ from rosbags.interfaces import QosTime as _QosTime
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from tqdm import tqdm
 
+from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.pipeline.pipeline import Pipeline
-from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
+from sepfm_ros.ros.answer import (
+    AnswerSettings,
+    BadInput,
+    PairCalibration,
+    PairHeaders,
+    answer_pair,
+    decode_pair,
+    internal_error_text,
+    precheck,
+)
+from sepfm_ros.ros.bags.errors import BagCorruptError, BagError
+from sepfm_ros.ros.bags.inputs import (
+    InputSpec,
+    camera_info_topics,
+    detect_inputs,
+    no_pairs_reason,
+)
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import (
     CAMERA_INFO,
-    DIAGNOSTIC_ARRAY,
     DIAGNOSTIC_STATUS,
     GROUND_TRUTH_TOPIC,
     IMAGE,
-    POINTCLOUD2,
+    MATCH_ARRAY,
     TRANSFORM_STAMPED,
+    TWO_VIEW_ESTIMATE,
+    format_stamp,
     header_stamp_ns,
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.calibrated import CalibratedStream
-from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
-from sepfm_ros.ros.messages import (
-    copy_header,
-    estimate_info,
-    fundamental_to_image,
-    result_to_pointcloud2,
-    stamp_ns,
-)
-from sepfm_ros.ros.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
+from sepfm_ros.ros.messages import copy_header, stamp_ns
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (
     OUTPUT_NAMESPACE,
+    FrameResult,
     calibrated_topics,
     format_summary,
     format_table,
@@ -81,7 +95,8 @@ from sepfm_ros.ros.results import (
     summarize,
 )
 from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
-from sepfm_ros.ros.sync import LEFT, RIGHT
+from sepfm_ros.stream.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
+from sepfm_ros.stream.sync import LEFT, RIGHT
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
 _ZERO = _QosTime(0, 0)
@@ -117,6 +132,10 @@ class PairJob:
     run: int = 0
     stereo: bool = False
 
+    def headers(self) -> PairHeaders:
+        """The pair's output header and its images' headers."""
+        return PairHeaders(self.header, self.msg_a.header, self.msg_b.header)
+
 
 @dataclass
 class InputStamps:
@@ -124,6 +143,7 @@ class InputStamps:
 
     topics: tuple[str, ...]
     sequence: list[tuple[str, int]]
+    skipped: list[tuple[str, int, BadInput]] = field(default_factory=list)
 
     @cached_property
     def stamps(self) -> dict[str, list[int]]:
@@ -133,10 +153,35 @@ class InputStamps:
             out[topic].append(stamp)
         return out
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """Each topic's number of usable frames (not skipped for their fields)."""
+        return {t: len(v) for t, v in self.stamps.items()}
+
+    @property
+    def skipped_counts(self) -> dict[str, int]:
+        """Each topic's number of frames skipped for unusable fields."""
+        return {t: sum(s[0] == t for s in self.skipped) for t in self.topics}
+
+    def no_pairs_reason(
+        self, spec: InputSpec, frame_gap: int, slop_ns: int | None, slop_flag: str | None
+    ) -> str:
+        """Why these stamps give no pair (:func:`~sepfm_ros.ros.bags.inputs.no_pairs_reason`)."""
+        return no_pairs_reason(
+            spec, self.counts, frame_gap, slop_ns, slop_flag, self.skipped_counts
+        )
+
     def warnings(self, jump_back_s: float) -> list[str]:
         """One line per topic whose stamps repeat, step back or jump back, saying what the
         pairing (the node's) does with them."""
         lines = []
+        for topic in self.topics:
+            bad = [b for t, _, b in self.skipped if t == topic]
+            if bad:
+                lines.append(
+                    f"warning: {topic}: {len(bad)} message(s) with unusable fields are skipped, "
+                    f"as the node skips them (first: {bad[0].kind}: {bad[0].text})"
+                )
         for topic, stamps in self.stamps.items():
             skipped, restarts = stamp_order_effects(stamps, jump_back_s)
             if skipped or restarts:
@@ -170,7 +215,7 @@ def paired_frames(
     slop_ns: int | None,
     events: Iterable[tuple[str, int, Any, int]],
 ) -> Iterator[Paired]:
-    """The node's pairing (:mod:`sepfm_ros.ros.pairing`) of input events (topic, stamp ns,
+    """The node's pairing (:mod:`sepfm_ros.stream.pairing`) of input events (topic, stamp ns,
     item, log time ns) in bag order."""
     jump_s = float(params["stamp_jump_reset_s"])
     if spec.mode == "stereo":
@@ -195,15 +240,20 @@ def iter_pairs(
 ) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
-    Pairing is the node's (:mod:`sepfm_ros.ros.pairing`): a frame whose stamp is not after its
+    Pairing is the node's (:mod:`sepfm_ros.stream.pairing`): a frame whose stamp is not after its
     topic's newest is skipped, a jump back of more than ``stamp_jump_reset_s`` restarts the
     pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
     """
-    msg_class = CompressedImage if spec.transport == "compressed" else Image
+    msg_class = input_class(spec)
+    zero_step = ZeroStepNotes()
 
     def events() -> Iterator[tuple[str, int, Any, int]]:
         for raw in reader.messages(spec.topics):
             msg = deserialize_message(raw.data, msg_class)
+            if precheck(msg) is not None:  # as the node, skip unusable fields before pairing
+                continue
+            if (note := zero_step.note(raw.topic, msg)) is not None:
+                print(f"\nsepfm_ros process: warning: {note}", file=sys.stderr, flush=True)
             yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
@@ -221,14 +271,33 @@ def iter_pairs(
         )
 
 
+def input_class(spec: InputSpec) -> type:
+    """The message class of the input topics: CompressedImage or Image."""
+    return CompressedImage if spec.transport == "compressed" else Image
+
+
 def validate_inputs(reader: BagReader, spec: InputSpec) -> InputStamps:
-    """Scan the input topics' header stamps before any output exists.
+    """Scan the input topics' header stamps before any output exists, and check each message's
+    fields as the node does before pairing (:func:`~sepfm_ros.ros.answer.precheck`).
 
     Raises BagCorruptError (unreadable data). Irregular stamps are not refused: the pairing
-    skips or restarts on them as the node does (:meth:`InputStamps.warnings`).
+    skips or restarts on them as the node does, and a message with unusable fields is skipped
+    as in the node (:meth:`InputStamps.warnings`).
     """
-    sequence = [(raw.topic, header_stamp_ns(raw.data)) for raw in reader.messages(spec.topics)]
-    return InputStamps(tuple(spec.topics), sequence)
+    msg_class = input_class(spec)
+    sequence, skipped = [], []
+    for raw in reader.messages(spec.topics):
+        stamp = header_stamp_ns(raw.data)
+        try:
+            msg = deserialize_message(raw.data, msg_class)
+        except Exception as err:  # noqa: BLE001 - any CDR the message class cannot read
+            raise BagCorruptError(f"{raw.topic}: unreadable message at {stamp} ns: {err}") from None
+        bad = precheck(msg)
+        if bad is None:
+            sequence.append((raw.topic, stamp))
+        else:
+            skipped.append((raw.topic, stamp, bad))
+    return InputStamps(tuple(spec.topics), sequence, skipped)
 
 
 def pairing_slop_ns(params: dict[str, Any], left_stamps: list[int], slop_given: bool) -> int:
@@ -268,7 +337,7 @@ class CameraInfos:
 
 def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
     """The camera_info beside each input topic, when the bag has them all (else None)."""
-    topics = spec.camera_info_topics()
+    topics = camera_info_topics(reader, spec)
     if not all(t in reader.topics and reader.topics[t].count for t in topics):
         return None
     for t in topics:
@@ -290,6 +359,13 @@ def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -
     if spec.mode == "stereo":
         return min(counts)
     return max(0, counts[0] - int(params["frame_gap"]))
+
+
+def decoded(result: FrameResult) -> bool:
+    """The pair's images were decoded (its result is not a bad-input record)."""
+    return (
+        result.estimate is not None and result.estimate.status != TwoViewEstimate.STATUS_BAD_INPUT
+    )
 
 
 def parse_params(items: list[str]) -> dict[str, Any]:
@@ -374,11 +450,9 @@ def run_process(
                 flush=True,
             )
         total = inputs.pair_count(spec, params, slop_ns)
-        if total == 0 and spec.mode == "stereo" and all(inputs.stamps.values()):
-            raise BagError(
-                f"no stereo pairs: no {spec.topics[0]} image has a {spec.topics[1]} image within "
-                f"{slop_ns / 1e6:.1f} ms of its stamp (set -p sync_slop_s:=SECONDS)"
-            )
+        if total == 0:
+            gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
+            raise BagError(inputs.no_pairs_reason(spec, gap, slop_ns, flag))
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
@@ -401,9 +475,8 @@ def run_process(
             )
         done = 0
         with BagWriter(out, flush_interval_s=None) as writer:
-            writer.add_topic(topics["fundamental"], IMAGE, (OUTPUT_QOS,))
-            writer.add_topic(topics["matches"], POINTCLOUD2, (OUTPUT_QOS,))
-            writer.add_topic(topics["estimate_info"], DIAGNOSTIC_ARRAY, (OUTPUT_QOS,))
+            writer.add_topic(topics["estimate"], TWO_VIEW_ESTIMATE, (OUTPUT_QOS,))
+            writer.add_topic(topics["matches"], MATCH_ARRAY, (OUTPUT_QOS,))
             if calibrated is not None:
                 topics = {**topics, **calibrated_topics(namespace)}
                 writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
@@ -427,7 +500,7 @@ def run_process(
                         stop.check()
                     calib = None
                     if calibrated is not None:
-                        calib = (calibrated, infos.at(stamp_ns(job.header.stamp)))
+                        calib = PairCalibration(calibrated, infos.at(stamp_ns(job.header.stamp)))
                     for data in process_pair(pipeline, job, params, topics, calib):
                         writer.write(data[0], job.log_time_ns, data[1])
                     writer.flush()  # every result survives a kill from now on
@@ -445,73 +518,34 @@ def process_pair(
     job: PairJob,
     params: dict[str, Any],
     topics: dict[str, str],
-    calibrated: tuple[CalibratedStream, list[Any]] | None = None,
+    calibration: PairCalibration | None = None,
 ) -> list[tuple[str, bytes]]:
-    """The node's outputs for one pair as (topic, CDR bytes), as the node publishes them.
+    """The node's messages for one pair as (topic, CDR bytes), in the order the node publishes
+    them (:func:`~sepfm_ros.ros.answer.answer_pair`: the same answer as the node's, a failure
+    record for a pair that cannot be decoded or whose frame size changed).
 
-    ``calibrated``: the stream's calibration and the pair's latest camera_info messages: F in
-    undistorted pixels, plus the relative transform and calibration check topics.
+    ``calibration``: the stream's calibration and the pair's latest camera_info messages: F in
+    undistorted pixels, the pose, plus the relative transform and calibration check topics.
     """
-    t0 = time.perf_counter()
-    try:
-        image_a, image_b = pair_to_numpy(job.msg_a, job.msg_b, "mono8")
-    except ImageDecodeError as err:
-        print(
-            f"\nskipping the pair at {job.header.stamp.sec}.{job.header.stamp.nanosec:09d}: {err}",
-            file=sys.stderr,
-        )
-        return []
-    decode_ms = (time.perf_counter() - t0) * 1e3
-    if not job.stereo and image_a.shape != image_b.shape:
-        print(
-            f"\nskipping a pair: the camera's frame size changed from {image_a.shape[1::-1]} "
-            f"to {image_b.shape[1::-1]}",
-            file=sys.stderr,
-        )
-        return []
-    cameras = None
+    settings = AnswerSettings.of(pipeline.config, params["publish_unreliable"])
+    decoded = decode_pair(job.msg_a, job.msg_b, job.stereo)
+    keys = (job.key_a, job.key_b)
+    answer = answer_pair(pipeline, job.headers(), decoded, settings, keys, calibration)
+    if answer.result is None:
+        stamp = format_stamp(stamp_ns(job.header.stamp))
+        print(f"\npair at {stamp}: {answer.estimate.status_text}", file=sys.stderr)
+        if answer.error is not None:
+            print(internal_error_text(answer.error), file=sys.stderr)
+    update = answer.cameras_update
+    if update is not None and update.error is not None:
+        print(f"\ncamera_info unusable: {update.reason}", file=sys.stderr)
     out = []
-    if calibrated is not None:
-        stream, infos = calibrated
-        sizes = [image_a.shape[1::-1], image_b.shape[1::-1]]
-        update = stream.cameras(infos, sizes)
-        if update.error is not None:
-            print(f"\ncamera_info unusable: {update.reason}", file=sys.stderr)
-            out.append((topics["calibration_check"], serialize_message(update.error)))
-        cameras = update.cameras
-    matched = pipeline.match(
-        image_a, image_b, job.key_a, job.key_b, prior_timings_ms={"decode": decode_ms}
-    )
-    result = pipeline.estimate(matched, cameras)
-    extra_values: dict[str, Any] = {}
-    if cameras is not None:
-        frames = stream.frames(job.msg_a.header.frame_id, job.msg_b.header.frame_id)
-        calibrated_msgs = stream.messages(result, params["threshold_px"], job.header, frames)
-        extra_values = calibrated_msgs.values
-        if calibrated_msgs.transform is not None:
-            data = serialize_message(calibrated_msgs.transform)
-            out.append((topics["relative_transform"], data))
-        if calibrated_msgs.status is not None:
-            data = serialize_message(calibrated_msgs.status)
-            out.append((topics["calibration_check"], data))
-    if result.estimate.F is not None and (result.ok or params["publish_unreliable"]):
-        out.append(
-            (
-                topics["fundamental"],
-                serialize_message(fundamental_to_image(result.estimate.F, job.header)),
-            )
-        )
-    out.append((topics["matches"], serialize_message(result_to_pointcloud2(result, job.header))))
-    info = estimate_info(
-        result,
-        job.header,
-        job.msg_a.header.stamp,
-        job.msg_b.header.stamp,
-        pipeline.config.features,
-        node_name=OUTPUT_NAMESPACE,
-        extra_values=extra_values,
-    )
-    out.append((topics["estimate_info"], serialize_message(info)))
+    if answer.transform is not None:
+        out.append((topics["relative_transform"], serialize_message(answer.transform)))
+    if answer.calibration is not None:
+        out.append((topics["calibration_check"], serialize_message(answer.calibration)))
+    out.append((topics["matches"], serialize_message(answer.matches)))
+    out.append((topics["estimate"], serialize_message(answer.estimate)))
     return out
 
 
@@ -593,6 +627,7 @@ def main(argv: list[str]) -> int:
         return 1
     if args.table:
         print(format_table(results))
+    undecoded = not interrupted and total > 0 and not any(decoded(r) for r in results)
     expected = None if interrupted else total
     print(format_summary(summarize(results, expected)))
     if interrupted:
@@ -603,4 +638,11 @@ def main(argv: list[str]) -> int:
         )
         return 130
     print(f"wrote {args.output}: {done} of {total} pairs")
+    if undecoded:
+        print(
+            f"sepfm_ros process: error: none of the {total} pairs could be decoded (the reasons "
+            "are above)",
+            file=sys.stderr,
+        )
+        return 1
     return 0

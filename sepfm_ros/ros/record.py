@@ -9,6 +9,9 @@ cause; large best-effort images arrive as in the node (``sepfm_ros.ros.dds``).
 
 The bag is flushed every ``--flush-interval`` seconds (default 1): even a killed recorder leaves
 a readable bag with everything up to the last flush; a clean stop keeps everything.
+
+Exit codes: 0 recorded (a topic that never had a publisher is a warning), 1 an error (an output
+name that exists or names another format, nothing recorded at all). Ctrl-C is the normal stop.
 """
 
 from __future__ import annotations
@@ -204,5 +207,15 @@ def main(argv: list[str]) -> int:
         advice = dds.lost_sample_advice("the recorder")
         print(f"sepfm_ros record: samples lost in transport ({lost}): {advice}", file=sys.stderr)
     if missing:
-        print(f"sepfm_ros record: never saw a publisher of {', '.join(missing)}", file=sys.stderr)
+        print(
+            f"sepfm_ros record: warning: never saw a publisher of {', '.join(missing)}",
+            file=sys.stderr,
+        )
+    if code == 0 and not any(recorder.counts.values()):
+        print(
+            f"sepfm_ros record: error: nothing recorded: no message on {', '.join(args.topics)} "
+            f"({args.output} holds no message)",
+            file=sys.stderr,
+        )
+        code = 1
     return code

@@ -1,32 +1,29 @@
 """Read the node's outputs back from a bag and score them against the bag's ground truth.
 
 Used by ``process`` (its summary), ``demo`` (the per-frame table) and the replay tests (live vs
-offline). The error against ground truth is the one of the node tests and the evaluation: the
-median symmetric epipolar distance, under the estimated F, of the matches that are within
-``GT_INLIER_PX`` (1 px) of the ground-truth F ("positives", from the ``~/matches`` cloud).
+offline). The node's answers are typed (``sepfm_msgs/TwoViewEstimate`` on ``~/estimate``,
+``sepfm_msgs/MatchArray`` on ``~/matches``). The error against ground truth is the one of the
+node tests and the evaluation: the median symmetric epipolar distance, under the estimated F, of
+the matches that are within ``GT_INLIER_PX`` (1 px) of the ground-truth F ("positives", from
+``~/matches``).
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray
 from rclpy.serialization import deserialize_message
-from sensor_msgs.msg import Image, PointCloud2
+from sensor_msgs.msg import Image
 
+from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.geometry import symmetric_epipolar_distance
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
-from sepfm_ros.ros.messages import (
-    ESTIMATE_STATUS_NAME,
-    fundamental_from_image,
-    matches_from_pointcloud2,
-    stamp_ns,
-    status_values,
-)
+from sepfm_ros.ros.messages import fundamental_from_image, stamp_ns
+from sepfm_ros.ros.typed_msgs import fundamental_from_msg
 
 GT_INLIER_PX = 1.0
 OUTPUT_NAMESPACE = "/sepfm"
@@ -36,9 +33,8 @@ def output_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
     """kind -> topic of the node's outputs under ``namespace`` (the node's ``~``)."""
     ns = namespace.rstrip("/")
     return {
-        "fundamental": f"{ns}/fundamental",
+        "estimate": f"{ns}/estimate",
         "matches": f"{ns}/matches",
-        "estimate_info": f"{ns}/estimate_info",
     }
 
 
@@ -70,15 +66,35 @@ def run_label(run: int) -> str:
     return f"#{run + 1}" if run else ""
 
 
+MATCH_TABLE_DTYPE = np.dtype(
+    [
+        ("u_a", "f8"),
+        ("v_a", "f8"),
+        ("u_b", "f8"),
+        ("v_b", "f8"),
+        ("error_px", "f8"),
+        ("inlier", "?"),
+        ("on_line", "?"),
+    ]
+)
+
+
+def match_table(msg: MatchArray) -> np.ndarray:
+    """A MatchArray's matches as a structured (N,) array of MATCH_TABLE_DTYPE (the fields of
+    sepfm_msgs/Match)."""
+    rows = [(m.u_a, m.v_a, m.u_b, m.v_b, m.error_px, m.inlier, m.on_line) for m in msg.matches]
+    return np.array(rows, dtype=MATCH_TABLE_DTYPE)
+
+
 @dataclass
 class FrameResult:
-    """The node's outputs for one stamp (the newer image's stamp)."""
+    """The node's answer for one stamp (the output header's stamp): its TwoViewEstimate and
+    its matches (a MATCH_TABLE_DTYPE array)."""
 
     stamp_ns: int
     run: int = 0  # the input's stamps jumped back this many times before it (a looped bag)
-    F: np.ndarray | None = None
-    cloud: np.ndarray | None = None  # structured MATCH_DTYPE array
-    info: dict[str, str] = field(default_factory=dict)
+    estimate: TwoViewEstimate | None = None
+    match_rows: np.ndarray | None = None
     F_gt: np.ndarray | None = None
 
     @property
@@ -87,41 +103,52 @@ class FrameResult:
         return run_label(self.run)
 
     @property
+    def F(self) -> np.ndarray | None:
+        """The answer's F (3, 3), None without one."""
+        if self.estimate is None or not self.estimate.has_f:
+            return None
+        return fundamental_from_msg(self.estimate)
+
+    @property
     def matches(self) -> int:
-        return int(self.info.get("matches", len(self.cloud) if self.cloud is not None else 0))
+        if self.estimate is not None:
+            return int(self.estimate.matches)
+        return len(self.match_rows) if self.match_rows is not None else 0
 
     @property
     def inliers(self) -> int:
-        return int(self.info.get("inliers", 0))
+        return int(self.estimate.inliers) if self.estimate is not None else 0
 
     @property
     def hypotheses(self) -> int:
-        return int(self.info.get("hypotheses", 0))
+        return int(self.estimate.hypotheses) if self.estimate is not None else 0
 
     @property
     def status(self) -> str:
-        return self.info.get("status", "no info")
+        return self.estimate.status_text if self.estimate is not None else "no estimate"
 
     def pts(self) -> tuple[np.ndarray, np.ndarray]:
-        if self.cloud is None or len(self.cloud) == 0:
+        """(N, 2) pixels of the matches in image a and image b."""
+        if self.match_rows is None or len(self.match_rows) == 0:
             return np.zeros((0, 2)), np.zeros((0, 2))
-        c = self.cloud
-        pts_a = np.stack([c["u_a"], c["v_a"]], axis=1).astype(np.float64)
-        pts_b = np.stack([c["u_b"], c["v_b"]], axis=1).astype(np.float64)
+        c = self.match_rows
+        pts_a = np.stack([c["u_a"], c["v_a"]], axis=1)
+        pts_b = np.stack([c["u_b"], c["v_b"]], axis=1)
         return pts_a, pts_b
 
     @property
     def error_px(self) -> float:
         """Error against ground truth (see the module docstring); NaN without F or GT."""
-        if self.F is None or self.F_gt is None:
+        F = self.F
+        if F is None or self.F_gt is None:
             return float("nan")
-        return gt_error_px(self.F, self.F_gt, *self.pts())
+        return gt_error_px(F, self.F_gt, *self.pts())
 
 
 def read_results(
     bag: str | Path, namespace: str = OUTPUT_NAMESPACE, gt_bag: str | Path | None = None
 ) -> list[FrameResult]:
-    """Per-pair outputs found in ``bag`` (by run, then stamp), with GT from ``gt_bag`` or ``bag``.
+    """Per-pair answers found in ``bag`` (by run, then stamp), with GT from ``gt_bag`` or ``bag``.
 
     The node and ``process`` publish each output topic's pairs in increasing stamp order; a
     stamp at or before the topic's previous one means they restarted their pairing (a looped
@@ -141,17 +168,12 @@ def read_results(
     with BagReader(bag) as reader:
         wanted = [t for t in topics.values() if t in reader.topics]
         for msg in reader.messages(wanted):
-            if msg.topic == topics["fundamental"]:
-                m = deserialize_message(msg.data, Image)
-                frame(msg.topic, stamp_ns(m.header.stamp)).F = fundamental_from_image(m)
-            elif msg.topic == topics["matches"]:
-                m = deserialize_message(msg.data, PointCloud2)
-                frame(msg.topic, stamp_ns(m.header.stamp)).cloud = matches_from_pointcloud2(m)
+            if msg.topic == topics["estimate"]:
+                m = deserialize_message(msg.data, TwoViewEstimate)
+                frame(msg.topic, stamp_ns(m.header.stamp)).estimate = m
             else:
-                m = deserialize_message(msg.data, DiagnosticArray)
-                for st in m.status:
-                    if st.name == ESTIMATE_STATUS_NAME:
-                        frame(msg.topic, stamp_ns(m.header.stamp)).info = status_values(st)
+                m = deserialize_message(msg.data, MatchArray)
+                frame(msg.topic, stamp_ns(m.header.stamp)).match_rows = match_table(m)
     gt = read_ground_truth(gt_bag if gt_bag is not None else bag)
     for (_, stamp), fr in frames.items():
         if stamp in gt:

@@ -66,8 +66,16 @@ class InputSpec:
         return f"{self.mode} from {' + '.join(self.topics)}"
 
 
-def _absolute(topic: str) -> str:
-    return topic if topic.startswith("/") else "/" + topic
+def _resolve(reader: BagReader, topic: str) -> str:
+    """A topic named by the user as the bag spells it (with or without the leading slash)."""
+    return reader.resolve(topic if topic.startswith("/") else "/" + topic)
+
+
+def camera_info_topics(reader: BagReader, spec: InputSpec) -> tuple[str, ...]:
+    """The ``camera_info`` topic beside each input topic as the bag spells it: an image topic
+    recorded without its leading slash still finds ``/camera/left/camera_info``, and the other
+    way round (:meth:`~sepfm_ros.ros.bags.reader.BagReader.resolve`)."""
+    return tuple(reader.resolve(t) for t in spec.camera_info_topics())
 
 
 def image_topics(reader: BagReader) -> list[str]:
@@ -155,11 +163,11 @@ def detect_inputs(
     if left is not None and right is not None:
         if mode == "motion":
             raise BagError("--left/--right select stereo input; --mode motion takes --image")
-        return _spec(reader, "stereo", (_absolute(left), _absolute(right)), False)
+        return _spec(reader, "stereo", (_resolve(reader, left), _resolve(reader, right)), False)
     if image is not None:
         if mode == "stereo":
             raise BagError("--image selects motion input; --mode stereo takes --left/--right")
-        return _spec(reader, "motion", (_absolute(image),), False)
+        return _spec(reader, "motion", (_resolve(reader, image),), False)
     streams = camera_streams(image_topics(reader))
     pairs = stereo_pairs(streams)
     if mode in (None, "stereo") and len(pairs) == 1 and (mode == "stereo" or len(streams) == 2):
@@ -177,3 +185,51 @@ def detect_inputs(
     else:
         why = f"{len(streams)} camera image topics, cannot tell which to use"
     raise TopicNotFoundError(_choices_text(reader, why, mode))
+
+
+def no_pairs_reason(
+    spec: InputSpec,
+    frames: dict[str, int],
+    frame_gap: int,
+    slop_ns: int | None,
+    slop_flag: str | None,
+    skipped: dict[str, int] | None = None,
+) -> str:
+    """Why the input topics give no pair, for the error of a command that found none.
+
+    Args:
+        spec: the input topics.
+        frames: usable frames per input topic.
+        frame_gap: motion pairs frame t - ``frame_gap`` with frame t.
+        slop_ns: the stereo pairing slop (ns), None in motion.
+        slop_flag: how the user sets the slop (``-p sync_slop_s:=SECONDS``, ``--sync-slop``;
+            None: the command has no way).
+        skipped: frames per topic skipped for unusable fields (as the node skips them).
+    """
+    skipped = skipped or {}
+    counts = ", ".join(
+        f"{t} has {frames.get(t, 0)} frame(s)"
+        + (f" ({skipped[t]} more skipped: unusable fields)" if skipped.get(t) else "")
+        for t in spec.topics
+    )
+    if spec.mode == "stereo":
+        if min(frames.get(t, 0) for t in spec.topics) == 0:
+            return (
+                f"no stereo pairs: {counts}; stereo needs a frame on both topics, paired by "
+                "header stamp"
+            )
+        return (
+            f"no stereo pairs: no {spec.topics[0]} image has a {spec.topics[1]} image within "
+            f"{(slop_ns or 0) / 1e6:.1f} ms of its stamp ({counts}"
+            + (f"; set {slop_flag})" if slop_flag else ")")
+        )
+    need = frame_gap + 1
+    if frames.get(spec.topics[0], 0) < need:
+        return (
+            f"no motion pairs: {counts}; motion pairs frame t - frame_gap with frame t, so it "
+            f"needs at least frame_gap + 1 = {need} frames"
+        )
+    return (
+        f"no motion pairs: {counts}, but no {need} of them with increasing header stamps "
+        "(stamps that repeat or step back are skipped)"
+    )

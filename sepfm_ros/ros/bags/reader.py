@@ -189,6 +189,18 @@ class BagReader:
     def message_count(self) -> int:
         return int(self._reader.message_count)
 
+    def resolve(self, topic: str) -> str:
+        """The bag's own spelling of ``topic``, matched with or without the leading slash.
+
+        ROS 1 bags and some recorders store names without it (``camera/left/image_raw``) while
+        users, image_transport and other topics of the same bag write ``/camera/...``; both
+        name one topic. Returns ``topic`` unchanged when the bag has neither spelling.
+        """
+        if topic in self.topics:
+            return topic
+        other = topic[1:] if topic.startswith("/") else "/" + topic
+        return other if other in self.topics else topic
+
     def require(self, topic: str, types: Sequence[str] = ()) -> TopicInfo:
         """The topic's info; TopicNotFoundError / UnknownTypeError if absent or of a wrong type."""
         info = self.topics.get(topic)

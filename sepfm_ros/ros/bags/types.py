@@ -65,7 +65,6 @@ register_sepfm_msgs(TYPESTORE)
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-POINTCLOUD2 = "sensor_msgs/msg/PointCloud2"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"

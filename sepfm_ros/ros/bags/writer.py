@@ -40,10 +40,27 @@ from sepfm_ros.ros.bags.errors import BagError, OutputExistsError, UnknownTypeEr
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.types import SEPFM_MSGS, TYPESTORE
 
+# file names of storage formats this writer does not write (it writes a rosbag2 folder, mcap)
+_OTHER_FORMATS = {".bag": "a ROS 1 bag file", ".db3": "a rosbag2 sqlite3 file"}
+
 
 def check_output_path(path: str | os.PathLike) -> Path:
-    """OutputExistsError when ``path`` exists; the parent folder must exist or be creatable."""
+    """The output bag's path, checked before any work: OutputExistsError when it exists,
+    BagError when its name says another format than the one written (a rosbag2 folder of
+    mcap storage): ``out.bag`` would be a folder that every reader takes for a ROS 1 file."""
     out = Path(path)
+    what = _OTHER_FORMATS.get(out.suffix.lower())
+    if what is not None:
+        raise BagError(
+            f"output {out} names {what}, but the output is a rosbag2 bag (a folder holding mcap "
+            f"storage): give a folder name without {out.suffix}, e.g. {out.with_suffix('')}"
+            + (
+                f" (rosbags-convert --src {out.with_suffix('')} --dst {out} makes a ROS 1 bag "
+                "of it)"
+                if out.suffix.lower() == ".bag"
+                else ""
+            )
+        )
     if out.exists():
         raise OutputExistsError(f"output {out} exists already; not overwriting (remove it first)")
     return out

@@ -10,7 +10,8 @@ directly: e_i is the signed symmetric epipolar distance in px (its absolute valu
 :func:`~sepfm_ros.geometry.epipolar.symmetric_epipolar_distance` measures; l2 = F x1, l1 = F^T x2,
 |l| the norm of a line's first two coordinates), t the truncation in px. F stays rank 2 on the
 way: it is held as F_n = U diag(1, sigma, 0) V^T in the normalised coordinates of
-:class:`~sepfm_ros.geometry.correspondences.Correspondences` (U, V rotations: 7 parameters), and
+:class:`~sepfm_ros.geometry.fundamental.correspondences.Correspondences` (U, V rotations: 7
+parameters), and
 each step solves the damped normal equations of the matches with |e_i| < t (the truncated loss's
 weights are 1 inside, 0 outside). A step is taken only if it lowers C. Matches farther than
 ``LM_REACH`` t from the start model are held at t^2 (they are not read again).
@@ -21,12 +22,12 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
     distances_within_kernel,
     msac_kernel,
 )
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
 from sepfm_ros.geometry.solvers.design import FAST_MATH, column_gram
 

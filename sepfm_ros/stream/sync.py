@@ -13,8 +13,8 @@ message_filters is not available from PyPI, so this is the stereo node's pairing
 - Emitted pairs therefore have strictly increasing stamps on both sides, each message is used at
   most once, and memory is bounded by ``2 x queue_size`` messages.
 
-Stamps are integer nanoseconds (``sec * 10**9 + nanosec``, :func:`sepfm_ros.ros.messages.stamp_ns`)
-to keep comparisons exact.
+Stamps are integer nanoseconds (``sec * 10**9 + nanosec``, converted by the ROS adapters:
+:func:`sepfm_ros.ros.messages.stamp_ns`) to keep comparisons exact.
 """
 
 from __future__ import annotations

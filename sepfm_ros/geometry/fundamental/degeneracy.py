@@ -42,7 +42,6 @@ import cv2
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     homogeneous,
     homogeneous_columns,
@@ -51,8 +50,9 @@ from sepfm_ros.geometry.epipolar import (
     paired_hits_kernel,
 )
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
-from sepfm_ros.geometry.ransac import ransac_trials, trials_needed
-from sepfm_ros.geometry.refine import fit_least_squares, iterative_refit
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.refine import fit_least_squares, iterative_refit
+from sepfm_ros.geometry.robust.trials import ransac_trials, trials_needed
 
 #: A match lies on the plane's homography when its transfer error is below this x the threshold.
 PLANE_TOLERANCE = 2.0

@@ -27,8 +27,8 @@ import math
 
 import numpy as np
 
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import paired_hits_kernel
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 
 #: Sample size s and models per sample M of :func:`log10_nfa` (the seven-point solver: F has 7
 #: degrees of freedom, and a sample gives up to 3 models).

@@ -14,7 +14,7 @@ from collections import deque
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
-from sepfm_ros.ros.sync import ApproximateTimeSync
+from sepfm_ros.stream.sync import ApproximateTimeSync
 
 T = TypeVar("T")
 

@@ -28,14 +28,14 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from sepfm_ros.geometry.camera import CameraModel
-from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance
-from sepfm_ros.geometry.pose import (
+from sepfm_ros.geometry.calibrated.camera import CameraModel
+from sepfm_ros.geometry.calibrated.pose import (
     refine_pose,
     stereo_baseline,
     stereo_fundamental,
     stereo_pose,
 )
+from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 LEVEL_NAMES = {OK: "OK", WARN: "WARN", ERROR: "ERROR", STALE: "STALE"}
@@ -126,7 +126,7 @@ def check_pair(
     Args:
         calib: the rig.
         pts_a, pts_b: (N, 2) matches in the estimator's pixels (undistorted pixels of K for raw
-            images, i.e. after :func:`~sepfm_ros.geometry.camera.undistort_points`).
+            images, i.e. after :func:`~sepfm_ros.geometry.calibrated.camera.undistort_points`).
         inliers: (N,) bool inlier mask of the estimated F.
         min_inliers: fewer inliers make the pair unusable (figures NaN).
         scale_px: soft-L1 scale (px) of the rotation fit, e.g. the estimator's threshold.

@@ -10,12 +10,13 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     denormalize_unit_kernel,
     distances_within_kernel,
     rank2_unit_kernel,
 )
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.robust.lmeds import lmeds_final_inliers
 from sepfm_ros.geometry.solvers.cholesky import cholesky_lower, cholesky_solve
 from sepfm_ros.geometry.solvers.design import column_gram, design_row
 
@@ -242,15 +243,13 @@ def lmeds_refit(
     """Least-median refits: refit F on its robust inliers, as long as the median improves.
 
     Each step takes the robust inliers of the current model (within 2.5 sigma of it, sigma its
-    reweighted LMedS scale, :func:`sepfm_ros.geometry.fundamental_problem.lmeds_final_inliers`
+    reweighted LMedS scale, :func:`sepfm_ros.geometry.robust.lmeds.lmeds_final_inliers`
     with p = ``model_points``) and refits them (:func:`refit`); the refit becomes current only
     if its median squared symmetric epipolar distance is lower, otherwise the refits stop.
 
     Returns:
         (K, 3, 3) every model fitted (K <= steps; 0 when the robust inliers are fewer than 8).
     """
-    from sepfm_ros.geometry.fundamental_problem import lmeds_final_inliers
-
     out = []
     d = data.distances(np.ascontiguousarray(F, dtype=np.float64))
     inl, _, med = lmeds_final_inliers(d, model_points)

@@ -16,8 +16,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.line_pairs import LinePair, control_points, line_parameter
-from sepfm_ros.geometry.ransac import trials_needed
+from sepfm_ros.geometry.robust.trials import trials_needed
+from sepfm_ros.geometry.separable.line_pairs import LinePair, control_points, line_parameter
 from sepfm_ros.geometry.solvers.line_homography import (
     line_homography_3pt_kernel,
     line_homography_lsq_kernel,
@@ -95,11 +95,11 @@ def stage1_ransac(
 ) -> tuple[np.ndarray, bool, int]:
     """RANSAC for H_e on K line correspondences, compiled: (h (4,), found, hypotheses).
 
-    The loop of :func:`sepfm_ros.geometry.ransac.run_ransac` for one arm: samples of 3 in
+    The loop of :func:`sepfm_ros.geometry.robust.loop.run_ransac` for one arm: samples of 3 in
     batches growing 1, 1, 2, 4, ... (at most ``batch``), minimal solve, MSAC score at
     ``threshold``, local optimisation (least squares on the inliers, at least 4) of every
     minimal-sample model that beats the best minimal-sample model so far, adaptive stopping
-    after F(3, r) samples (:func:`~sepfm_ros.geometry.ransac.trials_needed`, shared with the
+    after F(3, r) samples (:func:`~sepfm_ros.geometry.robust.trials.trials_needed`, shared with the
     generic loop). It stays a compiled twin because stage 1 runs once per line pair on a few
     dozen points, where the generic loop's per-batch Python overhead would dominate; a parity
     test (test_line_pairs_stage1.py) runs both loops on the same data.

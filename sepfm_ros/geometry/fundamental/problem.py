@@ -10,7 +10,6 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from sepfm_ros.geometry.correspondences import Correspondences
 from sepfm_ros.geometry.epipolar import (
     apply_transform,
     denormalize_kernel,
@@ -18,160 +17,39 @@ from sepfm_ros.geometry.epipolar import (
     sprt_msac_kernel,
     symmetric_epipolar_distance,
 )
-from sepfm_ros.geometry.nonlinear import polish_local_optimization
-from sepfm_ros.geometry.refine import iterative_refit, lmeds_refit
+from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+from sepfm_ros.geometry.fundamental.nonlinear import polish_local_optimization
+from sepfm_ros.geometry.fundamental.refine import iterative_refit, lmeds_refit
+from sepfm_ros.geometry.robust.contract import Problem
+from sepfm_ros.geometry.robust.lmeds import RobustScale, robust_scale
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.orientation import oriented_consistent
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
 SCORINGS = ("msac", "lmeds")
 
-#: Robust scale of least median of squares (Rousseeuw & Leroy 1987; Zhang 1998 for F):
-#: sigma = LMEDS_SCALE * (1 + 5 / (n - p)) * sqrt(median d^2), inliers d < LMEDS_INLIER * sigma.
-LMEDS_SCALE = 1.4826
-LMEDS_INLIER = 2.5
-#: Least robust scale, px: on noise-free data the residuals are rounding errors (~1e-13 px) and
-#: a scale from them would call half of the exact matches outliers.
-LMEDS_MIN_SCALE = 1e-6
-
-
-@numba.njit(cache=True, nogil=True, inline="always")
-def _det3(S: np.ndarray, r0: int, r1: int, r2: int, c0: int, c1: int, c2: int) -> float:
-    return (
-        S[r0, c0] * (S[r1, c1] * S[r2, c2] - S[r1, c2] * S[r2, c1])
-        - S[r0, c1] * (S[r1, c0] * S[r2, c2] - S[r1, c2] * S[r2, c0])
-        + S[r0, c2] * (S[r1, c0] * S[r2, c1] - S[r1, c1] * S[r2, c0])
-    )
-
-
-#: rows / columns kept in the 3x3 minors of a 4x4 matrix, by the one left out
-_MINOR = np.array([[1, 2, 3], [0, 2, 3], [0, 1, 3], [0, 1, 2]])
-
 
 @numba.njit(cache=True, nogil=True)
-def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray, r: np.ndarray) -> None:
-    """G (4, 4) = A^T A of the two DLT rows A (2, 4) of match x -> u in the basis N (9, 4);
-    r: (2, 4) work space."""
-    r[:] = 0.0
-    row0 = (x[0], x[1], 1.0, 0.0, 0.0, 0.0, -u[0] * x[0], -u[0] * x[1], -u[0])
-    row1 = (0.0, 0.0, 0.0, x[0], x[1], 1.0, -u[1] * x[0], -u[1] * x[1], -u[1])
-    for m in range(4):
-        for i in range(9):
-            r[0, m] += row0[i] * N[i, m]
-            r[1, m] += row1[i] * N[i, m]
-    for m in range(4):
-        for q in range(4):
-            G[m, q] = r[0, m] * r[0, q] + r[1, m] * r[1, q]
-
-
-@numba.njit(cache=True, nogil=True)
-def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj, S, h, H) -> float:
-    """Larger transfer error (image 2's units) of two matches under the least-squares
-    homography H = N h through them (``line_plane_basis``); h is the smallest eigenvector of
-    the 4x4 S = Gi + Gj, taken as the adjugate's largest column (S is near singular exactly
-    when the pair shares a plane with the line). S (4, 4), h (4,), H (9,): work space."""
-    for m in range(4):
-        for q in range(4):
-            S[m, q] = Gi[m, q] + Gj[m, q]
-    idx = _MINOR
-    best, col = -1.0, 0
-    for m in range(4):  # diagonal cofactors: the largest picks the column
-        c = _det3(S, idx[m, 0], idx[m, 1], idx[m, 2], idx[m, 0], idx[m, 1], idx[m, 2])
-        if c > best:
-            best, col = c, m
-    if not best > 0:
-        return 0.0  # rank <= 2: the pair does not fix H (coincident points); degenerate
-    for r in range(4):  # adj(S)[r, col] = (-1)^(r + col) minor(col, r)
-        sign = 1.0 if (r + col) % 2 == 0 else -1.0
-        rr, cc = idx[col], idx[r]
-        h[r] = sign * _det3(S, rr[0], rr[1], rr[2], cc[0], cc[1], cc[2])
-    H[:] = 0.0
-    for i in range(9):
-        for m in range(4):
-            H[i] += N[i, m] * h[m]
-    err = 0.0
-    for x, u in ((xi, ui), (xj, uj)):
-        w = H[6] * x[0] + H[7] * x[1] + H[8]
-        if w == 0.0:
-            return np.inf
-        du = (H[0] * x[0] + H[1] * x[1] + H[2]) / w - u[0]
-        dv = (H[3] * x[0] + H[4] * x[1] + H[5]) / w - u[1]
-        e = np.sqrt(du * du + dv * dv)
-        if not np.isfinite(e):
-            return np.inf
-        err = max(err, e)
-    return err
-
-
-@numba.njit(cache=True, nogil=True)
-def line_plane_degenerate(N, x1, x2, sample, tol) -> bool:
-    """True when some two points of ``sample`` share a plane with the line whose homographies
-    span ``N`` (9, 4) (see :func:`line_plane_basis`): both points' transfer errors under the
-    pair's least-squares homography below ``tol`` (image 2's normalised units).
-
-    3 collinear correspondences fix 5 of a plane homography's 8 degrees of freedom and 2 more
-    points fix 4, so one is left over to test.
-    """
-    k = sample.shape[0]
-    G = np.empty((k, 4, 4))
-    r = np.empty((2, 4))
-    S = np.empty((4, 4))
-    h = np.empty(4)
-    H = np.empty(9)
-    for i in range(k):
-        _point_gram(N, x1[sample[i]], x2[sample[i]], G[i], r)
-    for i in range(k):
-        for j in range(i + 1, k):
-            p, q = sample[i], sample[j]
-            if _pair_plane_error(N, G[i], G[j], x1[p], x2[p], x1[q], x2[q], S, h, H) < tol:
-                return True
-    return False
-
-
-def line_plane_basis(f1: np.ndarray, f2: np.ndarray) -> np.ndarray:
-    """(9, 4): an orthonormal basis (row-major H) of the homographies that map the (f >= 3, 2)
-    collinear correspondences f1 -> f2 (least squares: the 4 smallest right singular vectors of
-    their DLT rows), for the in-sample plane check."""
-    rows = []
-    for (x, y), (u, v) in zip(f1, f2, strict=True):
-        rows.append([x, y, 1.0, 0.0, 0.0, 0.0, -u * x, -u * y, -u])
-        rows.append([0.0, 0.0, 0.0, x, y, 1.0, -v * x, -v * y, -v])
-    _, _, Vt = np.linalg.svd(np.asarray(rows), full_matrices=True)
-    return np.ascontiguousarray(Vt[-4:].T)
-
-
-@numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol, oriented):
+def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
     normalised coordinates; samples: (B, k) indices; T1, T2: (3, 3) normalising transforms.
-    seven: seven-point (each real root a model) or eight-point. N: (9, 4) homographies of the
-    fixed line points (``line_plane_basis``) for the in-sample plane check, or (9, 0) for none;
-    a sample in which two points share a plane with the line (``line_plane_degenerate`` at
-    ``plane_tol``, image 2's normalised units) yields no model. oriented: a model whose sample
+    seven: seven-point (each real root a model) or eight-point. oriented: a model whose sample
     (fixed points included) breaks the oriented epipolar constraint
     (``solvers.orientation.oriented_consistent``) is dropped. Returns (F (K, 3, 3) in px at unit
     Frobenius norm, (K,) sample index of each model).
     """
-    B, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
-    keep = np.empty(B, dtype=np.int64)
-    n_keep = 0
-    for b in range(B):
-        if N.shape[1] == 4 and line_plane_degenerate(N, x1, x2, samples[b], plane_tol):
-            continue
-        keep[n_keep] = b
-        n_keep += 1
+    n_keep, k, f = samples.shape[0], samples.shape[1], f1.shape[0]
     if n_keep == 0:
         return np.empty((0, 3, 3)), np.empty(0, dtype=np.int64)
     y1 = np.empty((n_keep, f + k, 2))
     y2 = np.empty((n_keep, f + k, 2))
-    for i in range(n_keep):
-        b = keep[i]
+    for b in range(n_keep):
         for j in range(f + k):
             for c in range(2):
-                y1[i, j, c] = f1[j, c] if j < f else x1[samples[b, j - f], c]
-                y2[i, j, c] = f2[j, c] if j < f else x2[samples[b, j - f], c]
+                y1[b, j, c] = f1[j, c] if j < f else x1[samples[b, j - f], c]
+                y2[b, j, c] = f2[j, c] if j < f else x2[samples[b, j - f], c]
     if seven:
         F_n, sid = seven_point_kernel(y1, y2)
     else:
@@ -184,14 +62,15 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, N, plane_tol, o
         if oriented and not oriented_consistent(F_n[m], y1[sid[m]], y2[sid[m]]):
             continue
         if denormalize_kernel(F_n[m], T1, T2, F[n_out]):
-            out_sid[n_out] = keep[sid[m]]
+            out_sid[n_out] = sid[m]
             n_out += 1
     return F[:n_out], out_sid[:n_out]
 
 
 #: Local optimisation inside RANSAC: inlier-threshold factors (loosest first), Sampson IRLS
 #: iterations per refit, and whether the refits are followed by the Levenberg-Marquardt step of
-#: :func:`~sepfm_ros.geometry.nonlinear.polish_local_optimization`. ``"sampson"``: each refit is
+#: :func:`~sepfm_ros.geometry.fundamental.nonlinear.polish_local_optimization`. ``"sampson"``:
+#: each refit is
 #: Sampson-weighted, from 3x the threshold down (on forward motion, where points near the epipole
 #: fit many wrong F, plain least squares stops in a wrong basin); ``"lm"``: the same refits, then
 #: the truncated geometric error minimised from the best refit (and, on noisy matches, from the
@@ -205,58 +84,7 @@ LO_SCHEMES: dict[str, tuple[tuple[float, ...], int, bool]] = {
 }
 
 
-def robust_scale(median_sq: np.ndarray | float, n: int, p: int) -> np.ndarray | float:
-    """LMedS robust scale (px) from the median of squared residuals over n matches, sample size p.
-
-    sigma = 1.4826 * (1 + 5 / (n - p)) * sqrt(median d^2): 1.4826 makes it consistent for
-    Gaussian residuals, (1 + 5 / (n - p)) corrects the small-sample bias; at least
-    LMEDS_MIN_SCALE.
-    """
-    return np.maximum(
-        LMEDS_SCALE * (1.0 + 5.0 / max(n - p, 1)) * np.sqrt(median_sq), LMEDS_MIN_SCALE
-    )
-
-
-class RobustScale:
-    """The robust scale (px) of the best LMedS model so far, shared by every arm of one estimate,
-    so inlier counts of different models and arms are comparable (the race compares them).
-
-    ``sigma`` only shrinks: the best model has the lowest median and so the lowest scale.
-    """
-
-    def __init__(self) -> None:
-        self.sigma = np.inf
-
-    def update(self, sigma: float) -> None:
-        self.sigma = min(self.sigma, float(sigma))
-
-    @property
-    def threshold(self) -> float:
-        """Robust inlier threshold (px): LMEDS_INLIER * sigma."""
-        return LMEDS_INLIER * self.sigma
-
-
-def lmeds_inliers(d: np.ndarray, p: int) -> tuple[np.ndarray, float, float]:
-    """(N,) residuals (px) of one model -> (robust inlier mask, robust scale px, median d^2)."""
-    med = float(np.median(d * d))
-    sigma = float(robust_scale(med, d.shape[0], p))
-    return d < LMEDS_INLIER * sigma, sigma, med
-
-
-def lmeds_final_inliers(d: np.ndarray, p: int) -> tuple[np.ndarray, float, float]:
-    """Final LMedS inliers of one model from its (N,) residuals (px), Rousseeuw & Leroy's
-    reweighted scale: the preliminary scale s0 (:func:`robust_scale`) marks w_i = [d_i < 2.5
-    s0]; sigma = sqrt(sum w_i d_i^2 / (sum w_i - p)) (no longer inflated by the outliers above
-    the median); inliers d < 2.5 sigma. Returns (inlier mask, sigma px, median d^2)."""
-    first, _, med = lmeds_inliers(d, p)
-    k = int(np.count_nonzero(first))
-    if k <= p:
-        return first, float(robust_scale(med, d.shape[0], p)), med
-    sigma = max(float(np.sqrt(np.sum(d[first] ** 2) / (k - p))), LMEDS_MIN_SCALE)
-    return d < LMEDS_INLIER * sigma, sigma, med
-
-
-class FundamentalProblem:
+class FundamentalProblem(Problem):
     """One RANSAC arm estimating F.
 
     Args:
@@ -279,17 +107,12 @@ class FundamentalProblem:
         lo_data: the matches local optimisation fits on (refits and Levenberg-Marquardt, MSAC
             scoring), e.g. ``data.spread(k)``; its models are scored on ``data`` (default:
             ``data`` itself).
-        plane_tol: in-sample plane check (0: off): with at least 3 fixed line correspondences,
-            a sample two of whose points share a plane with the line (both points' transfer
-            errors under their least-squares homography with the line below ``plane_tol`` px,
-            see :func:`line_plane_degenerate`) is rejected before it is solved; it still counts
-            as drawn.
         fixed_tol: px (0: no check), the fixed correspondences' check: every one of them must
             lie within ``fixed_tol`` of a model for the arm's samples to be able to reach it
             (:meth:`fixed_inliers`).
         oriented: drop the models for which the sample's own matches break the oriented
             epipolar constraint (``solvers.orientation``), before they are scored.
-        race_share: in a race (``ransac.run_ransac``), the most share of all samples this arm
+        race_share: in a race (``robust.race``), the most share of all samples this arm
             draws while an arm without a share is active (1: no limit).
     """
 
@@ -304,7 +127,6 @@ class FundamentalProblem:
         pool: np.ndarray | None = None,
         lo: str = "lm",
         scale: RobustScale | None = None,
-        plane_tol: float = 0.0,
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
         oriented: bool = False,
@@ -342,13 +164,13 @@ class FundamentalProblem:
         #: p of the robust scale: the points that determine a model (fixed ones included)
         self.model_points = 7 if solver == "seven" else 8
         self.scale = scale if scale is not None else RobustScale()
-        if scoring == "lmeds":
-            self.recount = self._recount  # the race re-counts arms when the scale shrinks
-        self.plane_basis = np.zeros((9, 0))
-        self.plane_tol = 0.0
-        if plane_tol > 0 and len(self.f1) >= 3:
-            self.plane_basis = line_plane_basis(self.f1, self.f2)
-            self.plane_tol = float(plane_tol) * float(data.T2[0, 0])  # px -> image 2 normalised
+        # lmeds: counts are within the best model's robust scale; the race re-counts the arms
+        # (recount: the size of ``inliers``) when the scale shrinks
+        self.relative_counts = scoring == "lmeds"
+
+    def free_sample_size(self) -> int:
+        """Points of a seven- or eight-point sample, fixed ones included."""
+        return self.model_points
 
     def fixed_inliers(self, model: np.ndarray) -> bool:
         """Whether every fixed correspondence lies within ``fixed_tol`` px (symmetric epipolar
@@ -365,7 +187,7 @@ class FundamentalProblem:
         """(B, k) indices -> (F (K, 3, 3) in pixels, sample index (K,))."""
         return solve_samples_kernel(
             self.f1, self.f2, self.data.x1, self.data.x2, samples, self.data.T1, self.data.T2,
-            self.solver == "seven", self.plane_basis, self.plane_tol, self.oriented,
+            self.solver == "seven", self.oriented,
         )  # fmt: skip
 
     def distances(self, F: np.ndarray) -> np.ndarray:
@@ -385,10 +207,6 @@ class FundamentalProblem:
         the current robust threshold)."""
         thr = self.scale.threshold if self.scoring == "lmeds" else self.threshold
         return self.data.distances(model) < thr
-
-    def _recount(self, model: np.ndarray) -> int:
-        """lmeds: matches of ``model`` (3, 3) within the current robust inlier threshold."""
-        return int(np.count_nonzero(self.data.distances(model) < self.scale.threshold))
 
     def score_early(
         self,

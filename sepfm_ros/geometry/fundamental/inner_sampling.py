@@ -26,10 +26,10 @@ import numba
 import numpy as np
 
 from sepfm_ros.geometry.epipolar import msac_cost, msac_kernel
-from sepfm_ros.geometry.fundamental_problem import FundamentalProblem
-from sepfm_ros.geometry.nonlinear import noise_truncation
-from sepfm_ros.geometry.ransac import draw_samples
-from sepfm_ros.geometry.refine import normalized_model, refit_kernel
+from sepfm_ros.geometry.fundamental.nonlinear import noise_truncation
+from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.fundamental.refine import normalized_model, refit_kernel
+from sepfm_ros.geometry.robust.samplers import draw_samples
 
 #: Matches per inner sample: twice the seven of a minimal sample.
 INNER_SAMPLE_SIZE = 14

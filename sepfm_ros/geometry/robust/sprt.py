@@ -1,0 +1,64 @@
+"""Early rejection of minimal-sample models: Wald's SPRT (Matas & Chum 2008) and the exact
+bail-out, as state shared by the arms of one run."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sepfm_ros.geometry.robust.options import SamplingOptions
+
+__all__ = ["Sprt", "sprt_threshold"]
+
+
+def sprt_threshold(epsilon: float, delta: float, model_time: float, models_per_sample: float):
+    """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
+    A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
+    C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)
+    A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0
+    A = A0
+    for _ in range(20):
+        A = A0 + np.log(A)
+    return float(A)
+
+
+class Sprt:
+    """Adaptive SPRT / bail-out state of one run (shared by the arms: they score the same
+    points). Keeps epsilon (best model's inlier ratio), delta (inliers per point read in
+    SPRT-rejected models) and the threshold A; counts points read."""
+
+    def __init__(self, options: SamplingOptions, n: int) -> None:
+        self.opt = options
+        # a fixed pseudo-random reading order: the points come best first, and reading them in
+        # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
+        # the bail-out alone reproduces the plain run exactly
+        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
+        self.delta = options.sprt_delta
+        self.epsilon = 0.0
+        self.A = np.inf
+        self.rej_inliers = 0
+        self.rej_read = 0
+        self.models = 0
+        self.samples = 0
+        self.points_read = 0  #: points verified by minimal-sample scoring (all models)
+        self.rejected = 0  #: models rejected by the SPRT
+
+    def update(self, best_count: int, n: int) -> None:
+        """New epsilon / delta: recompute A (SPRT off while epsilon <= 1.5 delta)."""
+        if not self.opt.sprt:
+            return
+        eps = min(best_count / n, 0.999) if n else 0.0
+        if self.rej_read >= 50:  # enough evidence to replace the initial delta
+            self.delta = min(0.5, max(1e-4, self.rej_inliers / self.rej_read))
+        self.epsilon = eps
+        if eps <= 1.5 * self.delta:
+            self.A = np.inf
+        else:
+            ms = self.models / self.samples if self.samples else 1.0
+            self.A = sprt_threshold(eps, self.delta, self.opt.sprt_model_time, ms)
+
+    def logs(self) -> tuple[float, float, float]:
+        """(log A, log(delta / eps), log((1 - delta) / (1 - eps))) for the kernel."""
+        if not np.isfinite(self.A):
+            return np.inf, 0.0, 0.0
+        d, e = self.delta, self.epsilon
+        return float(np.log(self.A)), float(np.log(d / e)), float(np.log((1 - d) / (1 - e)))

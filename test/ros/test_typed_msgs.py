@@ -149,7 +149,11 @@ def test_typed_messages_arrive_whole_from_another_process(ros, tmp_path):
             }
         finally:
             publisher.terminate()
-            publisher.wait(30)
+            try:
+                publisher.wait(30)
+            except subprocess.TimeoutExpired:  # never leave a publisher behind
+                publisher.kill()
+                publisher.wait()
             for sub in subs:
                 ros.node.destroy_subscription(sub)
     assert both.is_set(), f"publisher exited early:\n{log_path.read_text()}"

@@ -14,12 +14,13 @@ from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.geometry import Estimate
 from sepfm_ros.geometry.estimate import StatusCode
 from sepfm_ros.pipeline.features import Matches
-from sepfm_ros.pipeline.pipeline import PipelineResult
+from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig, PipelineResult
 from sepfm_ros.ros.answer import (
     AnswerSettings,
     BadInput,
     DecodedPair,
     PairHeaders,
+    answer_pair,
     decode_pair,
     estimate_message,
     failure_answer,
@@ -170,3 +171,17 @@ def test_stamp_ns():
 
     assert stamp_ns(Time(sec=3, nanosec=250)) == 3_000_000_250
     assert stamp_ns(Time(sec=-2, nanosec=999_999_999)) == -1_000_000_001
+
+
+def test_an_error_while_answering_gives_the_internal_error_record():
+    """Images the pipeline cannot take (7 channels) make OpenCV raise inside the answer path:
+    the pair still gets its record, STATUS_INTERNAL_ERROR with the reason, and no matches."""
+    images = (np.zeros((40, 40, 7)), np.zeros((40, 40, 7)))
+    config = PipelineConfig()
+    answer = answer_pair(
+        Pipeline(config), HEADERS, DecodedPair(images, 0.0), AnswerSettings.of(config, True)
+    )
+    assert answer.estimate.status == TwoViewEstimate.STATUS_INTERNAL_ERROR
+    assert answer.estimate.status_text.startswith("internal error: error: OpenCV")
+    assert answer.error is not None and answer.result is None
+    assert answer.matches.matches == [] and not answer.estimate.has_f

@@ -12,9 +12,12 @@ import pytest
 from rclpy.serialization import deserialize_message
 from robot_bags import bag_path, write_robot_bag
 
+from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.ros.process import parse_params, run_process
+from sepfm_ros.ros.results import read_results
 
 N = 8
 TOPICS = ("/sepfm/relative_transform", "/sepfm/calibration_check")
@@ -66,6 +69,24 @@ def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_pat
         assert p.x > 0.9 * baseline
     assert checks[-1].name == "sepfm: calibration"
     assert checks[-1].level == b"\x00", checks[-1].message  # OK
+    # ~/estimate carries the same pose, metric, in undistorted pixels of K
+    estimates = {
+        stamp_ns(r.estimate.header.stamp): r.estimate for r in read_results(tmp_path / "out")
+    }
+    for tf in poses:
+        est = estimates[stamp_ns(tf.header.stamp)]
+        assert est.pose == tf.transform and est.pose_kind == TwoViewEstimate.POSE_METRIC
+        assert est.coordinates == "undistorted" and est.pose_status == "ok"
+
+
+def test_process_on_rectified_images_says_so(kitti, tmp_path):
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames[:2], K=K, baseline_m=baseline)
+    run_process(bag, tmp_path / "out", parse_params(["images:=rectified"]), progress=False)
+    results = read_results(tmp_path / "out")
+    assert len(results) == 2
+    for r in results:
+        assert r.estimate.coordinates == "rectified" and r.F is not None
 
 
 def test_process_flags_a_decalibrated_rig(kitti, tmp_path):

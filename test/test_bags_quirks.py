@@ -147,6 +147,16 @@ def test_a_slashed_image_topic_finds_a_camera_info_without_one(frames, tmp_path,
     assert f"camera_info from {infos[0]} + {infos[1]}" in capsys.readouterr().err
 
 
+def test_calibration_check_finds_camera_info_beside_slash_less_topics(frames, tmp_path):
+    rel = ("camera/left/image_raw", "camera/right/image_raw")
+    infos = ("/camera/left/camera_info", "/camera/right/camera_info")
+    bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", frames, topics=rel, info_topics=infos)
+    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    assert "Traceback" not in res.stderr and "has no camera_info" not in res.stderr, res.stderr
+    assert f"calibration from {infos[0]} and {infos[1]}" in res.stdout, res.stdout
+    assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout and "decision: " in res.stdout
+
+
 # ----------------------------------------------------------------------------- -o out.bag
 @pytest.mark.parametrize("name", ["out.bag", "out.db3"])
 def test_an_output_named_as_another_format_is_refused_before_any_work(frames, tmp_path, name):

@@ -117,6 +117,15 @@ def test_process_reads_step_zero_images_and_says_so_once(
     assert "read as packed rows of 480 B" in notes[0]
 
 
+def test_calibration_check_reads_step_zero_images_and_says_so_once(frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=zero_step_image)
+    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    assert "Traceback" not in res.stderr and "decision: " in res.stdout, res.stdout + res.stderr
+    assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout  # every pair decoded
+    notes = [line for line in res.stdout.splitlines() if "step 0" in line]
+    assert len(notes) == 2 and all(line.startswith("warning: ") for line in notes), notes
+
+
 # ----------------------------------------------------------------------------- leading slash
 @pytest.mark.parametrize("fmt", ["mcap", "ros1"])
 def test_image_topics_without_leading_slash_find_their_camera_info(fmt, frames, tmp_path, capsys):

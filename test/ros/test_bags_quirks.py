@@ -117,6 +117,15 @@ def test_process_reads_step_zero_images_and_says_so_once(
     assert "read as packed rows of 480 B" in notes[0]
 
 
+def test_calibration_check_reads_step_zero_images_and_says_so_once(frames, tmp_path):
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=zero_step_image)
+    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    assert "Traceback" not in res.stderr and "decision: " in res.stdout, res.stdout + res.stderr
+    assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout  # every pair decoded
+    notes = [line for line in res.stdout.splitlines() if "step 0" in line]
+    assert len(notes) == 2 and all(line.startswith("warning: ") for line in notes), notes
+
+
 # ----------------------------------------------------------------------------- leading slash
 @pytest.mark.parametrize("fmt", ["mcap", "ros1"])
 def test_image_topics_without_leading_slash_find_their_camera_info(fmt, frames, tmp_path, capsys):
@@ -145,6 +154,16 @@ def test_a_slashed_image_topic_finds_a_camera_info_without_one(frames, tmp_path,
     done, total = run_process(bag, tmp_path / "out", parse_params(PARAMS), progress=False)
     assert done == total == N_FRAMES
     assert f"camera_info from {infos[0]} + {infos[1]}" in capsys.readouterr().err
+
+
+def test_calibration_check_finds_camera_info_beside_slash_less_topics(frames, tmp_path):
+    rel = ("camera/left/image_raw", "camera/right/image_raw")
+    infos = ("/camera/left/camera_info", "/camera/right/camera_info")
+    bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", frames, topics=rel, info_topics=infos)
+    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    assert "Traceback" not in res.stderr and "has no camera_info" not in res.stderr, res.stderr
+    assert f"calibration from {infos[0]} and {infos[1]}" in res.stdout, res.stdout
+    assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout and "decision: " in res.stdout
 
 
 # ----------------------------------------------------------------------------- -o out.bag

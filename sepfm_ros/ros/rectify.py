@@ -242,15 +242,14 @@ class RectifyNode(Node):
     def log_throttled(self, kind: str, text: str, error: bool = True) -> None:
         """Log ``text`` unless a message of ``kind`` was logged in the last LOG_THROTTLE_S."""
         with self._lock:
-            held = self._throttle.admit(kind, time.monotonic())
-        if held is None:
+            line = self._throttle.message(kind, text, time.monotonic())
+        # one call site per severity: rclpy refuses another severity at the same call site
+        if line is None:
             return
-        more = f" [{held} more since the last report]" if held else ""
-        note = f" [logged at most every {LOG_THROTTLE_S:.0f} s, counted in /diagnostics]"
         if error:
-            self.get_logger().error(text + more + note)
+            self.get_logger().error(line)
         else:
-            self.get_logger().warning(text + more + note)
+            self.get_logger().warning(line)
 
     def _problem(self, kind: str, text: str, error: bool = True) -> None:
         self.count(kind)

@@ -318,6 +318,16 @@ def test_log_throttle_lets_a_recurring_problem_through_periodically():
     assert throttle.admit("bad_step", 10.5) == 2  # logged again, with the count held back
 
 
+def test_log_throttle_message_says_what_was_held_back():
+    throttle = LogThrottle(period_s=10.0)
+    assert throttle.message("decode", "bad", 0.0) == (
+        "bad [logged at most every 10 s, counted in /diagnostics]"
+    )
+    assert throttle.message("decode", "bad", 1.0) is None
+    later = throttle.message("decode", "bad", 11.0)
+    assert later is not None and later.startswith("bad [1 more since the last report]")
+
+
 # --------------------------------------------------------------------------- QoS
 def test_offered_reliability_matches_every_publisher():
     from rclpy.qos import ReliabilityPolicy

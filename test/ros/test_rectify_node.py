@@ -1,8 +1,12 @@
-"""``sepfm_ros rectify`` over real DDS: a test publisher sends a real stereo pair (KITTI, right
-image rotated 2 degrees) and the TwoViewEstimate + MatchArray of the pipeline's estimate on it;
-the rectifier publishes left/right image_rect with the inputs' stamps and sizes, rows aligned
-(SIFT matches between the two published images at under 0.5 px vertical disparity), holds its
-homographies through bad estimates, and counts bad input without stopping."""
+"""``sepfm_ros rectify`` over real DDS.
+
+- With a test publisher: a real stereo pair (KITTI, right image rotated 2 degrees) and the
+  TwoViewEstimate + MatchArray of the pipeline's estimate on it; the rectifier publishes
+  left/right image_rect with the inputs' stamps and sizes, rows aligned (SIFT matches between
+  the two published images at under 0.5 px vertical disparity), holds its homographies through
+  bad estimates, and counts bad input without stopping.
+- End to end: the sepfm node and the rectifier on the same image topics, at their defaults.
+"""
 
 from __future__ import annotations
 
@@ -25,6 +29,12 @@ from sensor_msgs.msg import Image  # noqa: E402
 
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineResult  # noqa: E402
 from sepfm_ros.pipeline.rectification import rectify_uncalibrated  # noqa: E402
+from sepfm_ros.ros.answer import (  # noqa: E402
+    AnswerSettings,
+    PairHeaders,
+    estimate_message,
+    match_array,
+)
 from sepfm_ros.ros.image_conversion import image_to_numpy  # noqa: E402
 from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
 from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
@@ -32,11 +42,7 @@ from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_rectify  # noqa: E402
 
-TwoViewEstimate, Match, MatchArray = (
-    sepfm_msgs.TwoViewEstimate,
-    sepfm_msgs.Match,
-    sepfm_msgs.MatchArray,
-)
+TwoViewEstimate, MatchArray = sepfm_msgs.TwoViewEstimate, sepfm_msgs.MatchArray
 NAME = "rectify_test"
 TIMEOUT = 60.0  # s; the machine is shared
 TARGET_PX = 0.5
@@ -45,34 +51,15 @@ TARGET_PX = 0.5
 def estimate_messages(
     result: PipelineResult, stamp: int, status: int | None = None
 ) -> tuple[TwoViewEstimate, MatchArray]:
-    """The TwoViewEstimate and MatchArray a sepfm node would publish for ``result`` (the
-    fields the rectifier reads), stamped ``stamp``; ``status`` overrides the estimate's."""
-    est = result.estimate
-    msg = TwoViewEstimate(header=header(stamp), stamp_a=header(stamp).stamp)
-    msg.stamp_b = header(stamp).stamp
-    msg.width_a, msg.height_a = result.size_a
-    msg.width_b, msg.height_b = result.size_b
-    msg.has_f = est.F is not None
-    msg.f = fundamental_field(est.F if est.F is not None else np.zeros((3, 3)))
-    msg.status = int(est.code) if status is None else status
-    msg.status_text = "ok" if status is None else "forced by the test"
-    msg.coordinates = result.coordinates
-    msg.matches, msg.inliers = len(result.matches), int(est.inliers.sum())
-    arr = MatchArray(header=header(stamp), stamp_a=msg.stamp_a, stamp_b=msg.stamp_b)
-    m = result.matches
-    arr.matches = [
-        Match(
-            u_a=float(a[0]),
-            v_a=float(a[1]),
-            u_b=float(b[0]),
-            v_b=float(b[1]),
-            error_px=float(e),
-            inlier=bool(i),
-            on_line=False,
-        )  # fmt: skip
-        for a, b, e, i in zip(m.pts_a, m.pts_b, result.errors, est.inliers, strict=True)
-    ]
-    return msg, arr
+    """The TwoViewEstimate and MatchArray the sepfm node publishes for ``result`` (its answer
+    path), stamped ``stamp``; ``status`` overrides the estimate's status."""
+    h = header(stamp)
+    headers = PairHeaders(h, h, h)
+    settings = AnswerSettings.of(bench_rectify.CONFIG, publish_unreliable=False)
+    msg = estimate_message(headers, result, settings, result.coordinates, None, False)
+    if status is not None:
+        msg.status, msg.status_text = status, "forced by the test"
+    return msg, match_array(headers, result)
 
 
 def row_disparity(img_a: np.ndarray, img_b: np.ndarray) -> float:
@@ -228,6 +215,7 @@ def test_rectifier_over_dds(rotated_pair, ros_domain_id, tmp_path):
         listener.wait_pair(s_left, s_right)
         health = listener.wait_count("published", 3)
         assert int(health["estimates_used"]) == 1
+        assert not [k for k in health if k.startswith("internal_")], health
         assert proc.proc.poll() is None
     except AssertionError as err:
         raise AssertionError(f"{err}\nrectifier's output:\n{proc.output()}") from None
@@ -235,3 +223,58 @@ def test_rectifier_over_dds(rotated_pair, ros_domain_id, tmp_path):
         code = proc.stop()
         ros.close()
     assert code == 0, proc.output()
+
+
+def test_rectifier_behind_the_sepfm_node(rotated_pair, ros_domain_id, tmp_path):
+    """The real node's ~/estimate and ~/matches drive the rectifier: the same image stream in,
+    rectified pairs out with the inputs' stamps, rows aligned."""
+    case, _ = rotated_pair
+    ros = Ros()
+    listener = Listener(ros)
+    pubs = {
+        "left": ros.node.create_publisher(Image, "/cam/left/image_raw", RELIABLE),
+        "right": ros.node.create_publisher(Image, "/cam/right/image_raw", RELIABLE),
+    }
+    inputs = ("-r", "left/image_raw:=/cam/left/image_raw",
+              "-r", "right/image_raw:=/cam/right/image_raw")  # fmt: skip
+    node = NodeProcess("sepfm_e2e", tmp_path, "-p", "mode:=stereo", *inputs)
+    rect = NodeProcess(
+        NAME, tmp_path, *inputs, "-p", "diagnostics_period_s:=0.2",
+        "-r", "sepfm/estimate:=/sepfm_e2e/estimate", "-r", "sepfm/matches:=/sepfm_e2e/matches",
+        "-r", "left/image_rect:=/left/image_rect", "-r", "right/image_rect:=/right/image_rect",
+        command="rectify",
+    )  # fmt: skip
+    try:
+        deadline = time.monotonic() + 3 * TIMEOUT  # the node loads its kernels first
+        while any(p.get_subscription_count() < 2 for p in pubs.values()) or (
+            ros.node.count_subscribers("/sepfm_e2e/estimate") == 0
+        ):
+            for proc in (node, rect):
+                assert proc.proc.poll() is None, proc.output()
+            assert time.monotonic() < deadline, "the two nodes did not come up"
+            time.sleep(0.1)
+        got = None
+        while got is None and time.monotonic() < deadline:
+            s = next_stamp()
+            pubs["left"].publish(image_msg(case.image_a, s))
+            pubs["right"].publish(image_msg(case.image_b, s))
+            end = time.monotonic() + 2.0
+            while got is None and time.monotonic() < end:
+                with listener.lock:
+                    if s in listener.rect["left"] and s in listener.rect["right"]:
+                        got = listener.rect["left"][s], listener.rect["right"][s]
+                time.sleep(0.05)
+        assert got is not None, "no rectified pair"
+        left, right = got
+        h, w = case.image_a.shape
+        assert (left.width, left.height) == (right.width, right.height) == (w, h)
+        assert left.header.frame_id == right.header.frame_id == "cam"
+        assert row_disparity(image_to_numpy(left), image_to_numpy(right)) < TARGET_PX
+    except AssertionError as err:
+        raise AssertionError(
+            f"{err}\nnode:\n{node.output()[-3000:]}\nrectifier:\n{rect.output()[-3000:]}"
+        ) from None
+    finally:
+        codes = (node.stop(), rect.stop())
+        ros.close()
+    assert codes == (0, 0)

@@ -115,6 +115,7 @@ setup(
             "pytest>=7",
             "hypothesis>=6",
             "ruff==0.17.6",  # pinned: lint and format rules change between releases
+            "mypy==2.4.1",  # pinned: new releases add checks ([tool.mypy] in pyproject.toml)
             "colcon-core",
             "colcon-ros",
             "poselib",

@@ -251,7 +251,7 @@ def test_every_imported_module_is_declared_in_package_xml():
         sorted((REPO_ROOT / "sepfm_ros").rglob("*.py")) + sorted(REPO_ROOT.glob("launch/*.py")),
         {"sepfm_ros"},
     )
-    test_files = sorted((REPO_ROOT / "test").glob("*.py"))
+    test_files = sorted((REPO_ROOT / "test").rglob("*.py"))
     benchmarks = sorted((REPO_ROOT / "benchmarks").glob("*.py"))  # tests import bench_docs
     local = {"sepfm_ros"} | {p.stem for p in test_files + benchmarks}
     tests = _imported_modules(test_files, local)

@@ -51,6 +51,7 @@ from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibrated import CalibratedStream
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
 from sepfm_ros.ros.parameters import parameter_error
 from sepfm_ros.ros.process import (
@@ -183,6 +184,7 @@ def run_check(
         for line in inputs.warnings(jump_s):
             print(line, file=out)
         sides = {left_info: "left", right_info: "right"}
+        zero_step = ZeroStepNotes()
 
         def events() -> Iterator[tuple[str, int, Any, int]]:
             """The image messages in bag order; camera_info messages update the rig."""
@@ -193,6 +195,8 @@ def run_check(
                 if raw.topic in sides:
                     rig.infos[sides[raw.topic]] = msg
                 elif precheck(msg) is None:  # as the node: unusable fields are never paired
+                    if (note := zero_step.note(raw.topic, msg)) is not None:
+                        print(f"warning: {note}", file=out)
                     yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
         def check_ready() -> None:

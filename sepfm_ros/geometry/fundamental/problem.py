@@ -7,6 +7,8 @@ solves, scores and refines through this one class, so their comparison is fair.
 
 from __future__ import annotations
 
+from typing import get_args
+
 import numba
 import numpy as np
 
@@ -19,6 +21,7 @@ from sepfm_ros.geometry.epipolar import (
 )
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.nonlinear import polish_local_optimization
+from sepfm_ros.geometry.fundamental.options import LoScheme, Scoring, Solver
 from sepfm_ros.geometry.fundamental.refine import iterative_refit, lmeds_refit
 from sepfm_ros.geometry.robust.contract import Problem
 from sepfm_ros.geometry.robust.lmeds import RobustScale, robust_scale
@@ -26,11 +29,21 @@ from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.orientation import oriented_consistent
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
-SCORINGS = ("msac", "lmeds")
+SCORINGS = get_args(Scoring)
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
+def solve_samples_kernel(
+    f1: np.ndarray,
+    f2: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    samples: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    seven: bool,
+    oriented: bool,
+) -> tuple[np.ndarray, np.ndarray]:
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
@@ -77,7 +90,7 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
 #: sample's model) at a truncation that follows the matches' noise (a linear refit minimises an
 #: algebraic error);
 #: ``"plain"``: unweighted least squares at 2x and 1x the threshold.
-LO_SCHEMES: dict[str, tuple[tuple[float, ...], int, bool]] = {
+LO_SCHEMES: dict[LoScheme, tuple[tuple[float, ...], int, bool]] = {
     "lm": ((3.0, 2.0, 1.5, 1.0), 2, True),
     "sampson": ((3.0, 2.0, 1.5, 1.0), 2, False),
     "plain": ((2.0, 1.0), 0, False),
@@ -119,13 +132,13 @@ class FundamentalProblem(Problem):
     def __init__(
         self,
         data: Correspondences,
-        solver: str = "seven",
+        solver: Solver = "seven",
         threshold: float = 1.0,
-        scoring: str = "msac",
+        scoring: Scoring = "msac",
         fixed1: np.ndarray | None = None,
         fixed2: np.ndarray | None = None,
         pool: np.ndarray | None = None,
-        lo: str = "lm",
+        lo: LoScheme = "lm",
         scale: RobustScale | None = None,
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
@@ -199,7 +212,7 @@ class FundamentalProblem(Problem):
             return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
         d = self.distances(models)
         cost = np.median(d * d, axis=1)
-        self.scale.update(robust_scale(cost.min(), self.n, self.model_points))
+        self.scale.update(float(robust_scale(cost.min(), self.n, self.model_points)))
         return cost, np.count_nonzero(d < self.scale.threshold, axis=1)
 
     def inliers(self, model: np.ndarray) -> np.ndarray:

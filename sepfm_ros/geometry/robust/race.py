@@ -96,7 +96,7 @@ class Race:
         if ov is None or ov[0] is not arm.top_model or ov[1] is not best.model:
             mask = self._best_inliers[1]
             own = arm.problem.inliers(arm.top_model)
-            share = np.count_nonzero(mask & own) / max(1, np.count_nonzero(mask))
+            share = float(np.count_nonzero(mask & own)) / max(1, int(np.count_nonzero(mask)))
             arm.overlap = ov = (arm.top_model, best.model, share)
         return ov[2] >= opt.pool_ratio
 

@@ -8,7 +8,7 @@ pairs. So a slice reads from ``read_from = t0 - overlap``, where the overlap hol
 frames with margin, pairs those frames as the unsliced run does, and runs the answer path on
 the last ``calibration_window`` pairs before t0 to fill the window (their answers are
 dropped; the slice before owns them). Pairs earlier than that are only paired, not estimated.
-The equality is tested (``test/test_audit.py``).
+The equality is tested (``test/fleet/test_audit.py``).
 """
 
 from __future__ import annotations

@@ -266,9 +266,8 @@ class Driver:
 def _rename_rigs(ledger: Ledger, pattern: Any) -> list[str]:
     """Every row's rig named with this run's ``--rig-from``; warnings about the naming."""
     rows = list(ledger.rows.values())
-    for r in rows:
-        if r["rig_id"] and r["rig_id"] != "unknown":
-            r["rig"] = rig_name(pattern, r["bag"], r["rig_id"])
+    for r in rows:  # a bag that could not be read is named by its path too, when it matches
+        r["rig"] = rig_name(pattern, r["bag"], r["rig_id"] or "unknown")
     ledger.rewrite_rows(rows)
     return naming_conflicts((r["rig"], r["rig_id"], r["bag"]) for r in rows)
 

@@ -3,9 +3,11 @@
 from __future__ import annotations
 
 import csv
+import importlib.util
 import math
 
 import pytest
+from ground_truth import REPO_ROOT
 
 from sepfm_ros.fleet.discovery import find_bags
 from sepfm_ros.fleet.ledger import BAGS_CSV, PAIRS_CSV, DuplicateRowError, Ledger
@@ -103,12 +105,19 @@ def test_ledger_one_row_per_bag_and_resume(tmp_path):
         assert list(csv.DictReader(f)) == []
 
 
+def _stream_no_ros():
+    """test/stream's check that a package imports with ROS blocked (one copy of it)."""
+    path = REPO_ROOT / "test" / "stream" / "test_stream_no_ros.py"
+    spec = importlib.util.spec_from_file_location("stream_no_ros_check", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
 def test_every_fleet_module_imports_without_ros():
     """The fleet's parts run on any Python (the driver's machine needs no ROS to plan or
     report); the bag side is sepfm_ros.ros.audit_adapter."""
-    from test_stream_no_ros import import_without_ros
-
-    r = import_without_ros("sepfm_ros.fleet")
+    r = _stream_no_ros().import_without_ros("sepfm_ros.fleet")
     assert r.returncode == 0, r.stdout + r.stderr
     imported = set(r.stdout.split())
     expected = {"discovery", "engine", "ledger", "records", "report", "rigs", "slices"}

@@ -107,6 +107,7 @@ JAZZY_INTERFACE_BUILD = {"ament_cmake", "rosidl_default_generators", "rosidl_def
 ROSDISTRO_KEYS = {
     "python3-numpy",
     "python3-opencv",
+    "python3-pil",
     "python3-scipy",
     "python3-matplotlib",
     "python3-tqdm",
@@ -123,6 +124,7 @@ ROSDISTRO_KEYS_NOT_ON_NOBLE = {"python3-numba"}
 MODULE_KEYS = {
     "numpy": "python3-numpy",
     "cv2": "python3-opencv",
+    "PIL": "python3-pil",
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",

@@ -16,6 +16,7 @@ import cv2
 import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message, serialize_message
+from rosbags.highlevel import AnyReader
 from sensor_msgs.msg import CompressedImage
 
 from sepfm_msgs.msg import TwoViewEstimate
@@ -181,3 +182,9 @@ def test_node_and_process_answer_bad_pairs_alike(tmp_path, ros_env):
     assert change.width_b == change.width_a // 2 and not change.has_f
     assert all(len(offline[k].match_rows) == 0 for k in (1, 2, 3))
     assert "truncated_compressed" in log  # frame 4: skipped by the node too
+    # the recorded answers carry their definitions: plain rosbags reads them (types from the bag)
+    with AnyReader([live.output]) as reader:
+        conns = [c for c in reader.connections if c.topic == "/sepfm/estimate"]
+        recorded = [reader.deserialize(raw, c.msgtype) for c, _, raw in reader.messages(conns)]
+    assert [int(m.status) for m in recorded] == codes
+    assert [m.bad_input_kind for m in recorded] == kinds

@@ -485,8 +485,8 @@ def test_typed_answers_reach_a_consumer_in_another_process(stereo, tmp_path):
             time.sleep(0.05)
         answers = consumer_answers(out)
     finally:
-        consumer.terminate()
-        consumer.wait(timeout=15)
+        consumer.kill()  # how the consumer ends is not under test
+        consumer.wait()
     got = [f for _, f in answers]
     assert all(status == "ok" for status, _ in answers[-3:]), answers
     for F, received in zip(sent, got[-3:], strict=True):  # in order, each once, exact

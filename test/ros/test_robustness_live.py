@@ -586,7 +586,7 @@ def test_invalid_runtime_parameters_rejected_node_keeps_working(robust, frames):
     stamp = next_stamp()
     send_pair(client, *pair_msgs(frames[0], stamp))
     values, F, _ = client.wait_outputs(stamp)
-    assert F is not None and values["status"] == "ok"
+    assert F is not None and values.status == TwoViewEstimate.STATUS_OK
 
 
 # --------------------------------------------------------------------------- a camera stops

@@ -6,8 +6,8 @@ Two ways to install, one setup.py:
   message packages come from the PyPI wheels in the ``ros`` extra, the project's interface
   package ``sepfm_msgs`` is built from its folder (pip cannot declare a local dependency); the
   one console command is ``sepfm_ros``.
-- ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process``, ``eval``, ``warm_up``, ``calibration_check`` and ``rectify`` are installed to
+- ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables of
+  ``EXECUTABLES`` below (``node``, ``process``, ``rectify``, ...) are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds

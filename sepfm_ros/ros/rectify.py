@@ -108,7 +108,8 @@ _PARAMS: dict[str, ParamSpec] = {
     ),
     "min_coverage": ParamSpec(
         MIN_COVERAGE,
-        "an estimate whose framed rectified images cover less of the output (share) is not used",
+        "an estimate whose framed rectified images cover less of the output, or keep less of"
+        " themselves in it (share), is not used",
         0.0,
         1.0,
     ),

@@ -111,11 +111,9 @@ ROSDISTRO_KEYS = {
     "python3-scipy",
     "python3-matplotlib",
     "python3-tqdm",
-    "python3-pil",
     "python3-ruamel.yaml",
     "python3-pytest",
     "python3-hypothesis",
-    "python3-pil",
 }
 # Keys rosdistro has whose Ubuntu rule lists only older releases: unresolvable on Jazzy.
 ROSDISTRO_KEYS_NOT_ON_NOBLE = {"python3-numba"}
@@ -128,7 +126,6 @@ MODULE_KEYS = {
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
-    "PIL": "python3-pil",
     "ruamel": "python3-ruamel.yaml",
     "rosbags": "python3-rosbags-pip",
     "rosbags.image": "python3-rosbags-image-pip",
@@ -139,7 +136,6 @@ MODULE_KEYS = {
     "dask": "python3-distributed-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
-    "PIL": "python3-pil",
     **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},
 }
 # Imported only where present; the code and tests say so when it is missing.

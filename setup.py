@@ -82,8 +82,8 @@ setup(
         "rosbags>=0.11",
         "rosbags-image>=0.10.3",
         # QOI images (a compressed format OpenCV does not read) are decoded by Pillow's QOI reader
-        # (9.5+; Ubuntu 24.04 ships 10.2); python3-pil in package.xml
-        "pillow>=10.2",
+        # (9.5+); python3-pil in package.xml
+        "pillow>=9.5",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
         # core); python3-threadpoolctl in package.xml
         "threadpoolctl>=3.1",

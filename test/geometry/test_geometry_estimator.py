@@ -328,3 +328,20 @@ def test_status_code_set_with_status_text():
     random = estimate_fundamental(pts1, rng.uniform(0, 640, (200, 2)), (640, 480), seed=0)
     assert random.code == StatusCode.NOT_SIGNIFICANT, random.status
     assert random.status.startswith("not significant")
+
+
+def test_options_are_composed_of_typed_parts_behind_the_flat_constructor():
+    from sepfm_ros.geometry.fundamental.options import Sampling
+    from sepfm_ros.geometry.options import EstimatorOptions
+    from sepfm_ros.geometry.separable.options import FixedPoints
+
+    o = EstimatorOptions(max_samples=300, triple="all", race_pool_ratio=0.5)
+    assert o.sampler == Sampling(max_samples=300) and o.max_samples == 300
+    assert o.fixed == FixedPoints(triple="all") and o.triple == "all"
+    assert o.race.race_pool_ratio == 0.5 and o.flat()["race_pool_ratio"] == 0.5
+    assert EstimatorOptions.from_kwargs(o, prosac=False).flat() == {**o.flat(), "prosac": False}
+    assert EstimatorOptions(**o.flat()) == o
+    with pytest.raises(ValueError, match="unknown options"):
+        EstimatorOptions(hough_points=100)  # a named constant, not an option
+    with pytest.raises(AttributeError, match="no option"):
+        _ = o.max_sample

@@ -1,0 +1,2 @@
+"""Calibrated geometry: camera models, the relative pose from F, and the stereo calibration
+check."""

@@ -86,17 +86,27 @@ def _check_live_equals_process(bag, tmp_path, median_limit_px: float):
     return live_results
 
 
+# Fields derived from F in floating point: the node (numpy's BLAS on one thread) and ``process``
+# may round F differently in its last bits (F agrees to 1e-9), so these agree to a relative 1e-6;
+# the pose's rotation (an SVD of E, whose two equal singular values make it ill-conditioned) to
+# 1e-4 degrees.
+DERIVED_FLOATS = ("inlier_error_px", "log10_nfa", "line_a", "line_b")
+ROTATION_TOLERANCE_DEG = 1e-4
+
+
 def answer_fields(msg) -> dict:
-    """Everything of a TwoViewEstimate but F and the timings (which differ run to run)."""
-    fields = {
+    """Everything of a TwoViewEstimate but F, the timings (which differ run to run), the pose
+    and the floats derived from F (:data:`DERIVED_FLOATS`, compared by :func:`derived_floats`)."""
+    return {
         name: getattr(msg, name)
         for name in msg.get_fields_and_field_types()
-        if name not in ("f", "timings", "line_a", "line_b", "pose")
+        if name not in ("f", "timings", "pose", "rotation_deg", *DERIVED_FLOATS)
     }
-    fields["line_a"], fields["line_b"] = list(msg.line_a), list(msg.line_b)
-    for name in ("inlier_error_px", "log10_nfa", "rotation_deg"):  # NaN != NaN
-        fields[name] = None if math.isnan(fields[name]) else round(fields[name], 9)
-    return fields
+
+
+def derived_floats(msg) -> np.ndarray:
+    """:data:`DERIVED_FLOATS` of a TwoViewEstimate as one float array (NaN where absent)."""
+    return np.concatenate([np.ravel(np.asarray(getattr(msg, n), float)) for n in DERIVED_FLOATS])
 
 
 def assert_same_answer(live, offline) -> None:
@@ -104,13 +114,26 @@ def assert_same_answer(live, offline) -> None:
     failure kind, counts, line pair, sizes, stamps), F to 1e-9 and every match."""
     assert live.estimate is not None and offline.estimate is not None
     assert answer_fields(live.estimate) == answer_fields(offline.estimate), live.stamp_ns
+    np.testing.assert_allclose(
+        derived_floats(live.estimate), derived_floats(offline.estimate), rtol=1e-6, atol=1e-9
+    )  # NaN where both are NaN compares equal
+    np.testing.assert_allclose(
+        live.estimate.rotation_deg,
+        offline.estimate.rotation_deg,
+        rtol=0,
+        atol=ROTATION_TOLERANCE_DEG,
+    )
     assert (live.F is None) == (offline.F is None)
     if live.F is not None:
         np.testing.assert_allclose(live.F, offline.F, rtol=0, atol=1e-9)
     assert live.match_rows is not None and offline.match_rows is not None
-    # same matches, errors, inlier and line flags (NaN errors without F compare equal)
+    # same matches, inlier and line flags; errors under F to a relative 1e-6 (NaN without F)
     for name in MATCH_TABLE_DTYPE.names:
-        np.testing.assert_array_equal(live.match_rows[name], offline.match_rows[name], name)
+        a, b = live.match_rows[name], offline.match_rows[name]
+        if name == "error_px":
+            np.testing.assert_allclose(a, b, rtol=1e-6, atol=1e-9, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a, b, name)
 
 
 @pytest.mark.parametrize("name", ["synthetic_stereo", "synthetic_motion"])

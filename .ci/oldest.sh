@@ -34,7 +34,8 @@ PY
 installed=$(date +%s)
 echo "oldest versions installed in $((installed - start)) s"
 "$venv/bin/python" -m pytest -q -p no:cacheprovider \
-    test/test_geometry_solvers.py test/test_geometry_estimator.py test/test_geometry_real.py \
-    test/test_image_conversion.py test/test_pipeline.py test/test_features.py \
-    test/test_node_startup.py test/test_node_live.py
+    test/geometry/test_geometry_solvers.py test/geometry/test_geometry_estimator.py \
+    test/geometry/test_geometry_real.py \
+    test/ros/test_image_conversion.py test/pipeline/test_pipeline.py test/pipeline/test_features.py \
+    test/ros/test_node_startup.py test/ros/test_node_live.py
 echo "oldest versions: tests took $(($(date +%s) - installed)) s"

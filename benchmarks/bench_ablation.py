@@ -16,10 +16,9 @@ GT-positive error < 1 px and >= 20 positives recovered), median hypotheses, medi
 median ms over USAC_MAGSAC's (same run).
 
     python benchmarks/bench_ablation.py [--sets lines,shared] [--step 4] [--seed 0]
-        [--write-docs [--readme README.md]]
+        [--write-docs]
 
-``--write-docs`` rewrites this script's section of docs/benchmarks.md and the table between the
-``<!-- ablation:begin -->`` / ``<!-- ablation:end -->`` markers of README.md.
+``--write-docs`` rewrites this script's section of docs/benchmarks.md.
 Figures are measured on this machine in this run; nothing is asserted.
 """
 
@@ -145,7 +144,6 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--step", type=int, default=4, help="every STEP-th pair of each manifest")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--write-docs", action="store_true")
-    ap.add_argument("--readme", type=Path, default=bench_docs.README)
     ap.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC)
     a = ap.parse_args(argv)
     names = [s for s in a.sets.split(",") if s]
@@ -172,9 +170,7 @@ def main(argv: list[str] | None = None) -> int:
         path = bench_docs.write_section(
             "bench_ablation", bench_docs.section("bench_ablation", title, command, body), a.doc
         )
-        readme = a.readme.read_text()
-        a.readme.write_text(bench_docs.replace_block(readme, "ablation", body))
-        print(f"wrote {path} and {a.readme}", file=sys.stderr)
+        print(f"wrote {path}", file=sys.stderr)
     return 0
 
 

@@ -34,6 +34,10 @@ SECTIONS = {
     "bench_node": "python benchmarks/bench_node.py --write-docs",
     "bench_node_pairs": "python benchmarks/bench_node_pairs.py --write-docs",
     "bench_robustness": "python benchmarks/bench_robustness.py --write-docs",
+    "bench_rectify": "python benchmarks/bench_rectify.py --write-docs",
+    "bench_engines": "python benchmarks/bench_engines.py --write-docs",
+    "bench_audit": "python benchmarks/bench_audit.py --write-docs",
+    "bench_rigs": "python benchmarks/bench_rigs.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

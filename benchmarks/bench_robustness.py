@@ -3,8 +3,9 @@
     python benchmarks/bench_robustness.py [--fuzz-raw 10000] [--fuzz-compressed 3000]
         [--overload-s 60] [--overload-runs 1] [--kill-trials 20] [--out FILE.md] [--write-docs]
 
-The default sizes are the same as the default test run (CI runs these tests in
-full: test/test_robustness_live.py, test/test_robustness_bags.py, test/test_degeneracy.py);
+The default sizes are the same as the default test run (CI runs these tests in full:
+test/ros/test_robustness_live.py, test/ros/test_robustness_bags.py,
+test/geometry/test_degeneracy.py);
 larger values make longer soak runs. The tests print each figure as ``[robustness] ...`` and,
 through the environment variable SEPFM_ROBUSTNESS_REPORT, hand them to this script, which writes
 the report, prints it and with ``--write-docs`` puts it in docs/benchmarks.md (bench_docs.py).
@@ -30,7 +31,11 @@ from pathlib import Path
 import bench_docs
 
 REPO = Path(__file__).resolve().parent.parent
-TESTS = ["test/test_robustness_live.py", "test/test_robustness_bags.py", "test/test_degeneracy.py"]
+TESTS = [
+    "test/ros/test_robustness_live.py",
+    "test/ros/test_robustness_bags.py",
+    "test/geometry/test_degeneracy.py",
+]
 
 TITLES = {
     "fuzz_raw": "Fuzz: malformed sensor_msgs/Image to the live node",

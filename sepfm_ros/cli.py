@@ -22,6 +22,8 @@ SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "process": ("sepfm_ros.ros.process", "main", "run the pipeline over a bag offline"),
     "eval": ("sepfm_ros.evaluation.cli", "main", "evaluate estimators on pairs with ground truth"),
     "calibration_check": ("sepfm_ros.ros.calibration_check", "main", "check a stereo calibration"),
+    "rectify": ("sepfm_ros.ros.rectify", "main", "rectified stereo images without camera_info"),
+    "audit": ("sepfm_ros.ros.audit", "main", "audit many rigs' calibration over many bags"),
     "warm_up": (
         "sepfm_ros.warm_up",
         "main",
@@ -77,3 +79,5 @@ process_main = _entry("process")
 eval_main = _entry("eval")
 warm_up_main = _entry("warm_up")
 calibration_check_main = _entry("calibration_check")
+rectify_main = _entry("rectify")
+audit_main = _entry("audit")

@@ -105,6 +105,7 @@ def replay_through_node(
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
+    from sepfm_ros.ros.bags.inputs import camera_info_topics
     from sepfm_ros.ros.bags.writer import BagWriter
     from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params
     from sepfm_ros.ros.record import Recorder
@@ -162,7 +163,7 @@ def replay_through_node(
     try:
         # the images and, where the bag has them, their camera_info (calibrated outputs)
         with BagReader(bag) as reader:
-            infos = [t for t in spec.camera_info_topics() if t in reader.topics]
+            infos = [t for t in camera_info_topics(reader, spec) if t in reader.topics]
         # reliable whatever the bag recorded: a best-effort camera's recording would otherwise
         # lose its large frames to the transport on this host (sepfm_ros/ros/dds.py)
         replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate, reliable=True)

@@ -18,10 +18,17 @@ Fixtures:
   instead of each compiling for tens of seconds.
 - ``ros_domain_id``: the session's ROS_DOMAIN_ID; live tests (real DDS) request it.
 
+The test tree mirrors the package: ``test/geometry``, ``test/pipeline``, ``test/stream``,
+``test/ros``, ``test/evaluation``, ``test/fleet``, ``test/benchmarks``, and the whole-package
+tests here. ``python -m pytest test/geometry`` runs one layer (the geometry, pipeline, stream and
+fleet folders need no rclpy). Helpers shared by several folders (``ros_helpers``, ``robot_bags``,
+``ground_truth``, ...) live here; this conftest's folder is on ``sys.path``.
+
 Markers (registered in pyproject.toml): ``ros`` (real DDS) and ``shared_data`` are applied here
 to every test that uses the fixture of that name; ``slow`` and ``timing`` are set in the test
-modules, or below in ``MODULE_MARKS`` for whole modules. ``python -m pytest`` runs everything
-(what CI runs); ``python -m pytest -m "not slow"`` is the fast run while developing.
+modules, or for whole modules by ``MODULE_MARKS`` in each folder's conftest
+(:func:`markers.mark_modules`). ``python -m pytest`` runs everything (what CI runs);
+``python -m pytest -m "not slow"`` is the fast run while developing.
 """
 
 from __future__ import annotations
@@ -31,20 +38,12 @@ import random
 from pathlib import Path
 
 import pytest
+from markers import mark_modules
 
 REPO_ROOT = Path(__file__).resolve().parent.parent
 SHARED_DATA = REPO_ROOT.parent / "shared" / "data"
 
-# whole modules that are slow (more than about half a minute on a 2-core machine) or whose
-# assertions bound latency or throughput (``timing``: may fail on a heavily loaded machine);
-# other modules mark themselves with ``pytestmark``
-MODULE_MARKS: dict[str, tuple[str, ...]] = {
-    "test_node_live": ("slow", "timing"),
-    "test_robustness_live": ("slow", "timing"),
-    "test_robustness_bags": ("slow",),
-    "test_bags_replay": ("slow",),
-    "test_colcon_run": ("slow",),
-}
+MODULE_MARKS: dict[str, tuple[str, ...]] = {"test_colcon_run": ("slow",)}
 
 
 def pytest_configure(config: pytest.Config) -> None:
@@ -60,9 +59,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.ros)
         if "shared_data" in names or "shared_data_lines" in names:
             item.add_marker(pytest.mark.shared_data)
-        module = getattr(getattr(item, "module", None), "__name__", "").rsplit(".", 1)[-1]
-        for mark in MODULE_MARKS.get(module, ()):
-            item.add_marker(getattr(pytest.mark, mark))
+    mark_modules(items, Path(__file__).parent, MODULE_MARKS, recursive=False)
 
 
 def _shared_folder(folder: Path) -> Path:

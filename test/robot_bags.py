@@ -277,6 +277,24 @@ def write_camera_bag(
     return path
 
 
+def write_stereo_without_right(path: Path, left: np.ndarray, ground_truth: bool = False) -> Path:
+    """A rosbag2 stereo bag whose right topic was recorded but holds no message."""
+    ts = _typestore("mcap")
+    with Writer2(path, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        conn_l = writer.add_connection(LEFT_TOPIC, IMAGE_T, typestore=ts)
+        writer.add_connection(RIGHT_TOPIC, IMAGE_T, typestore=ts)
+        header = _header(ts, "mcap", START_NS, "left", 0)
+        writer.write(conn_l, START_NS, bytes(ts.serialize_cdr(_image(ts, header, left), IMAGE_T)))
+        if ground_truth:
+            gt = writer.add_connection(GT_TOPIC, IMAGE_T, typestore=ts)
+            F = np.frombuffer(np.eye(3).tobytes(), np.uint8)
+            msg = ts.types[IMAGE_T](
+                header=header, height=3, width=3, encoding="64FC1", is_bigendian=0, step=24, data=F
+            )
+            writer.write(gt, START_NS, bytes(ts.serialize_cdr(msg, IMAGE_T)))
+    return path
+
+
 def header_stamps(bag: Path, topic: str) -> list[int]:
     """The header stamps (ns) of ``topic``'s messages in ``bag``, in bag order."""
     with BagReader(bag) as reader:

@@ -41,16 +41,22 @@ SETTLE_TIMEOUT = 120.0  # s; a loaded 2-core machine can take seconds per pair
 
 # --------------------------------------------------------------------------- node subprocess
 class NodeProcess:
-    """``python -m sepfm_ros node --ros-args ...`` as a subprocess with its output in a file."""
+    """``python -m sepfm_ros node --ros-args ...`` (or another ``command``) as a subprocess
+    with its output in a file."""
 
     def __init__(
-        self, name: str, tmp: Path, *ros_args: str, env: dict[str, str | None] | None = None
+        self,
+        name: str,
+        tmp: Path,
+        *ros_args: str,
+        env: dict[str, str | None] | None = None,
+        command: str = "node",
     ) -> None:
         """``env``: variables to set in the node's environment (None: unset it)."""
         self.name = name
         self.log_path = tmp / f"{name}.log"
         self._log = open(self.log_path, "w")  # noqa: SIM115 - closed in stop()
-        cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={name}"]
+        cmd = [sys.executable, "-m", "sepfm_ros", command, "--ros-args", "-r", f"__node:={name}"]
         cmd += list(ros_args)
         environ = dict(os.environ, PYTHONUNBUFFERED="1", RCUTILS_LOGGING_BUFFERED_STREAM="0")
         for key, value in (env or {}).items():

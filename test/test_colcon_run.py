@@ -66,7 +66,7 @@ def installed_env(install: Path) -> dict[str, str]:
 
 def test_colcon_build_installs_executables_and_share_files(colcon_install):
     prefix = colcon_install / "sepfm_ros"
-    for name in ("node", "make_bag", "replay", "record", "process", "eval", "warm_up"):
+    for name in ("node", "make_bag", "replay", "record", "process", "eval", "warm_up", "rectify"):
         assert os.access(prefix / "lib" / "sepfm_ros" / name, os.X_OK), name
     share = prefix / "share" / "sepfm_ros"
     assert (share / "package.xml").is_file()
@@ -94,15 +94,17 @@ def test_colcon_built_interface_package_serialises_its_messages(colcon_install, 
         "import sepfm_msgs; from sepfm_msgs.msg import TwoViewEstimate as T;"
         "from rclpy.serialization import serialize_message as s, deserialize_message as d;"
         "m = d(s(T(status_text='built by colcon', inliers=7)), T);"
-        "print(sepfm_msgs.__file__); print(m.status_text, m.inliers, T.STATUS_BAD_INPUT)"
+        "print(sepfm_msgs.__file__); print(m.status_text, m.inliers, T.STATUS_BAD_INPUT);"
+        "from sepfm_ros.ros.bags.types import sepfm_msgs_share; print(sepfm_msgs_share())"
     )
     r = subprocess.run(
         [sys.executable, "-c", code], env=env, cwd=tmp_path, capture_output=True, text=True
     )
     assert r.returncode == 0, r.stderr
-    module_file, values = r.stdout.splitlines()
+    module_file, values, share = r.stdout.splitlines()
     assert Path(module_file).is_relative_to(prefix), module_file  # colcon's, not pip's copy
     assert values == "built by colcon 7 5"
+    assert Path(share) == prefix / "share" / "sepfm_msgs"  # where bags get the definitions
 
 
 def test_ros2_run_warm_up_caches_kernels_inside_the_install(colcon_install, tmp_path):

@@ -7,7 +7,7 @@ import ast
 import importlib.util
 
 import pytest
-from conftest import REPO_ROOT
+from ground_truth import REPO_ROOT
 
 LAUNCH = REPO_ROOT / "launch" / "sepfm_launch.py"
 ARGUMENTS = {"mode", "transport", "params_file", "namespace", "use_sim_time", "left", "right"}

@@ -37,7 +37,17 @@ def test_console_command_lists_every_subcommand():
         [sys.executable, "-m", "sepfm_ros", "--help"], capture_output=True, text=True, timeout=60
     )
     assert r.returncode == 0
-    for name in ("node", "make_bag", "replay", "record", "process", "eval", "demo", "warm_up"):
+    for name in (
+        "node",
+        "make_bag",
+        "replay",
+        "record",
+        "process",
+        "eval",
+        "demo",
+        "warm_up",
+        "rectify",
+    ):
         assert f"  {name}" in r.stdout
     r = subprocess.run(
         [sys.executable, "-m", "sepfm_ros", "no_such_command"], capture_output=True, text=True
@@ -46,7 +56,7 @@ def test_console_command_lists_every_subcommand():
 
 
 @pytest.mark.parametrize(
-    "name", ["node", "make_bag", "replay", "record", "process", "eval", "warm_up"]
+    "name", ["node", "make_bag", "replay", "record", "process", "eval", "warm_up", "rectify"]
 )
 def test_every_subcommand_has_help(name):
     r = subprocess.run(
@@ -97,6 +107,7 @@ JAZZY_INTERFACE_BUILD = {"ament_cmake", "rosidl_default_generators", "rosidl_def
 ROSDISTRO_KEYS = {
     "python3-numpy",
     "python3-opencv",
+    "python3-pil",
     "python3-scipy",
     "python3-matplotlib",
     "python3-tqdm",
@@ -111,6 +122,7 @@ ROSDISTRO_KEYS_NOT_ON_NOBLE = {"python3-numba"}
 MODULE_KEYS = {
     "numpy": "python3-numpy",
     "cv2": "python3-opencv",
+    "PIL": "python3-pil",
     "scipy": "python3-scipy",
     "matplotlib": "python3-matplotlib",
     "tqdm": "python3-tqdm",
@@ -120,6 +132,8 @@ MODULE_KEYS = {
     "numba": "python3-numba-pip",
     "llvmlite": "python3-numba-pip",
     "threadpoolctl": "python3-threadpoolctl",
+    "distributed": "python3-distributed-pip",
+    "dask": "python3-distributed-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
     **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},
@@ -239,7 +253,7 @@ def test_every_imported_module_is_declared_in_package_xml():
         sorted((REPO_ROOT / "sepfm_ros").rglob("*.py")) + sorted(REPO_ROOT.glob("launch/*.py")),
         {"sepfm_ros"},
     )
-    test_files = sorted((REPO_ROOT / "test").glob("*.py"))
+    test_files = sorted((REPO_ROOT / "test").rglob("*.py"))
     benchmarks = sorted((REPO_ROOT / "benchmarks").glob("*.py"))  # tests import bench_docs
     local = {"sepfm_ros"} | {p.stem for p in test_files + benchmarks}
     tests = _imported_modules(test_files, local)

@@ -26,7 +26,7 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import detect_inputs, no_pairs_reason
+from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BAG_SUFFIXES, BagReader
 from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
@@ -88,9 +88,7 @@ def _input_bag_pairs(
             continue
         pairs.append(PairSpec(pid, bag.name, F, img_a=paths[0], img_b=paths[1], kind=spec.mode))
     if not pairs and not errors:
-        frames = {t: len(v) for t, v in inputs.stamps.items()}
-        gap = int(params["frame_gap"])
-        why = no_pairs_reason(spec, frames, gap, slop_ns, None)
+        why = inputs.no_pairs_reason(spec, int(params["frame_gap"]), slop_ns, None)
         errors.append(PairError(bag.name, bag.name, f"bag {bag}: {why}"))
     return pairs, errors
 

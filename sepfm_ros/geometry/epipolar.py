@@ -36,7 +36,9 @@ def normalize_fundamental(F: np.ndarray) -> np.ndarray:
     return (flat * sign / np.where(norm == 0, 1.0, norm)).reshape(F.shape)
 
 
-def _epipolar_terms(F: np.ndarray, X1: np.ndarray, X2: np.ndarray):
+def _epipolar_terms(
+    F: np.ndarray, X1: np.ndarray, X2: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per-model algebraic residuals and the first two coordinates of the epipolar lines.
 
     F: (M, 3, 3); X1, X2: (3, N) homogeneous points. Returns (r, l2, l1): r (M, N) =

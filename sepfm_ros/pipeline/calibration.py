@@ -130,9 +130,9 @@ class StreamCalibration:
         if est.F is not None:
             K_a, K_b = self.cameras[0].K, self.cameras[1].K
             pose = relative_pose(est.F, pts_a, pts_b, K_a, K_b, est.inliers, scale_px=threshold_px)
-        scaled = self.rig is not None and pose is not None and pose.ok
-        if scaled:
-            pose = pose.scaled(self.rig.baseline)
+        scaled = False
+        if self.rig is not None and pose is not None and pose.ok:
+            scaled, pose = True, pose.scaled(self.rig.baseline)
         if self.rig is None:
             return CalibratedOutputs(pose, scaled, None, None)
         inliers = est.inliers if est.F is not None else np.zeros(len(pts_a), bool)

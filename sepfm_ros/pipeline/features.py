@@ -10,6 +10,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cache
 from importlib import metadata
+from typing import Any, cast
 
 import cv2
 import numba
@@ -57,9 +58,9 @@ def make_detector(features: str = "orb", max_features: int = 1000) -> cv2.Featur
             message names the fix, see :func:`unavailable_reason`).
     """
     if features == "orb":
-        return cv2.ORB_create(nfeatures=int(max_features))
+        return cv2.ORB.create(nfeatures=int(max_features))
     if features == "sift":
-        return cv2.SIFT_create(nfeatures=int(max_features) if max_features else 0)
+        return cv2.SIFT.create(nfeatures=int(max_features) if max_features else 0)
     if features == "akaze":
         create = _akaze_factory()
         if create is None:
@@ -135,27 +136,37 @@ def to_gray(image: np.ndarray) -> np.ndarray:
         code = cv2.COLOR_BGRA2GRAY if image.shape[2] == 4 else cv2.COLOR_BGR2GRAY
         image = cv2.cvtColor(image, code)
     if image.dtype != np.uint8:
-        image = cv2.normalize(image, None, 0, 255, cv2.NORM_MINMAX).astype(np.uint8)
+        scaled = cv2.normalize(image, np.empty_like(image), 0, 255, cv2.NORM_MINMAX)
+        image = np.asarray(scaled).astype(np.uint8)
     return image
 
 
 def detect(image: np.ndarray, detector: cv2.Feature2D) -> tuple[np.ndarray, np.ndarray | None]:
     """Detect keypoints and descriptors: returns ((K, 2) float64 points, (K, D) descriptors)."""
     kps, desc = detector.detectAndCompute(to_gray(image), None)
-    pts = cv2.KeyPoint_convert(kps).astype(np.float64).reshape(-1, 2) if kps else np.zeros((0, 2))
+    pts = (
+        np.asarray(cv2.KeyPoint.convert(kps), dtype=np.float64).reshape(-1, 2)
+        if kps
+        else np.zeros((0, 2))
+    )
     return pts, desc
 
 
 @intrinsic
-def _popcount64(typingctx, x):
+def _popcount64(typingctx: Any, x: Any) -> tuple[Any, Callable[..., Any]]:
     """Set bits of a uint64 (LLVM's ctpop: one POPCNT, or a vector popcount in a vector loop)."""
     sig = types.uint64(types.uint64)
 
-    def codegen(context, builder, signature, args):
+    def codegen(context: Any, builder: Any, signature: Any, args: Any) -> Any:
         fn = builder.module.declare_intrinsic("llvm.ctpop", [ir.IntType(64)])
         return builder.call(fn, args)
 
     return sig, codegen
+
+
+#: the intrinsic as numba code calls it (one uint64 -> its set bits); its Python signature is the
+#: typing hook's (typingctx, x)
+_popcount = cast(Callable[[Any], Any], _popcount64)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -180,12 +191,12 @@ def _two_nearest_hamming(
         a_word = words_a[i, 0]
         b_words = words_b_t[0]
         for j in range(n_b):
-            dist[j] = _popcount64(a_word ^ b_words[j])
+            dist[j] = _popcount(a_word ^ b_words[j])
         for w in range(1, n_words):
             a_word = words_a[i, w]
             b_words = words_b_t[w]
             for j in range(n_b):
-                dist[j] += _popcount64(a_word ^ b_words[j])
+                dist[j] += _popcount(a_word ^ b_words[j])
         best, second = far, far
         j_best, j_second = 0, 0
         for j in range(n_b):

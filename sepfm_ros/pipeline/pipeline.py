@@ -28,11 +28,12 @@ import ctypes.util
 import threading
 import time
 from collections import OrderedDict
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+import cv2
 import numpy as np
 
 from sepfm_ros.geometry import (
@@ -171,7 +172,7 @@ class PipelineResult:
         return self.estimate.ok
 
 
-def _load_prctl():
+def _load_prctl() -> Callable[..., int] | None:
     try:
         return ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True).prctl
     except (OSError, AttributeError):
@@ -221,8 +222,8 @@ class Pipeline:
         self.images_detected = 0  # images whose features were computed
         self.images_cached = 0  # images whose features came from the cache
         self._config = PipelineConfig()
-        self._detector = None
-        self._detector_b = None  # the helper thread's detector (parallel_detect)
+        self._detector: cv2.Feature2D | None = None
+        self._detector_b: cv2.Feature2D | None = None  # the helper's (parallel_detect)
         self._helper = (
             ThreadPoolExecutor(
                 1,
@@ -279,6 +280,7 @@ class Pipeline:
         self, image: np.ndarray, key: Hashable | None
     ) -> tuple[np.ndarray, np.ndarray | None]:
         cached = self._cached(key)
+        assert self._detector is not None  # made by configure
         return cached if cached is not None else self._store(key, detect(image, self._detector))
 
     def _pair_features(
@@ -292,6 +294,7 @@ class Pipeline:
         cached = key_a in self._cache or key_b in self._cache
         if self._helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
+        assert self._detector is not None and self._detector_b is not None  # made by configure
         pending_b = self._helper.submit(detect, image_b, self._detector_b)
         feats_a = self._store(key_a, detect(image_a, self._detector))
         return feats_a, self._store(key_b, pending_b.result())

@@ -47,10 +47,11 @@ from sepfm_ros.ros.answer import (
     precheck,
 )
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.inputs import detect_inputs, no_pairs_reason
+from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.calibrated import CalibratedStream
+from sepfm_ros.ros.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.messages import camera_info_topic, stamp_ns
 from sepfm_ros.ros.parameters import parameter_error
 from sepfm_ros.ros.process import (
@@ -169,8 +170,7 @@ def run_check(
         slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
         total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
         if total == 0:
-            frames = {t: len(v) for t, v in inputs.stamps.items()}
-            raise BagError(no_pairs_reason(spec, frames, 0, slop_ns, "--sync-slop"))
+            raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "--sync-slop"))
         if args.max_pairs:
             total = min(total, args.max_pairs)
         rig = _Rig(rectified, _monitor_config(args))
@@ -184,6 +184,7 @@ def run_check(
         for line in inputs.warnings(jump_s):
             print(line, file=out)
         sides = {left_info: "left", right_info: "right"}
+        zero_step = ZeroStepNotes()
 
         def events() -> Iterator[tuple[str, int, Any, int]]:
             """The image messages in bag order; camera_info messages update the rig."""
@@ -194,6 +195,8 @@ def run_check(
                 if raw.topic in sides:
                     rig.infos[sides[raw.topic]] = msg
                 elif precheck(msg) is None:  # as the node: unusable fields are never paired
+                    if (note := zero_step.note(raw.topic, msg)) is not None:
+                        print(f"warning: {note}", file=out)
                     yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
         def check_ready() -> None:

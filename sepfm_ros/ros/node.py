@@ -112,13 +112,16 @@ class Job:
 
 @dataclass
 class MatchedJob:
-    """A matched pair waiting for the estimate thread."""
+    """A matched pair waiting for the estimate thread, or the failure record of a pair that
+    could not be matched (``failure``: published by the estimate thread too, so answers leave
+    in pair order)."""
 
     job: Job
-    matched: MatchedPair
-    images: tuple[np.ndarray, np.ndarray]  # decoded a, b (for ~/debug_image)
+    matched: MatchedPair | None
+    images: tuple[np.ndarray, np.ndarray] | None  # decoded a, b (for ~/debug_image)
     wait_ms: float  # receipt -> start of processing (decode)
     matched_at: float  # time.monotonic() when matching ended
+    failure: PairAnswer | None = None
 
 
 def guarded(callback: Callable[..., None]) -> Callable[..., None]:
@@ -405,12 +408,11 @@ class SepfmNode(Node):
             try:
                 matched = self._match(job)
             except Exception as err:  # keep serving; count, log and answer
-                self._internal_error(job, err)
-                continue
+                matched = self._failed(job, self._internal_error(job, err))
             if isinstance(matched, BadInput):
                 self._bad_input(matched.kind, matched.text)
-                self._publish_answer(failure_answer(job.headers(), matched, self._settings()))
-                continue
+                answer = failure_answer(job.headers(), matched, self._settings())
+                matched = self._failed(job, answer)
             self._scheduler.put_matched(matched, time.monotonic() - t0)
 
     def _estimate_loop(self) -> None:
@@ -422,21 +424,29 @@ class SepfmNode(Node):
                 return
             matched, t0 = taken
             try:
-                self._estimate_and_publish(matched)
-            except Exception as err:  # keep serving; count and log
-                self._internal_error(matched.job, err)
+                if matched.failure is not None:
+                    self._out.answer(matched.failure)
+                else:
+                    self._estimate_and_publish(matched)
+            except Exception as err:  # keep serving; count, log and answer
+                self._publish_answer(self._internal_error(matched.job, err))
             self._scheduler.estimate_done(t0)
 
-    def _internal_error(self, job: Job, err: Exception) -> None:
-        """Count and log an unexpected error of a pair and answer it (STATUS_INTERNAL_ERROR)."""
+    def _internal_error(self, job: Job, err: Exception) -> PairAnswer:
+        """Count and log an unexpected error of a pair; its answer (STATUS_INTERNAL_ERROR)."""
         self._bad_input(internal_error_kind(err), internal_error_text(err))
-        self._publish_answer(internal_error_answer(job.headers(), err, self._settings()))
+        return internal_error_answer(job.headers(), err, self._settings())
 
-    def _publish_answer(self, answer: PairAnswer, item: MatchedJob | None = None) -> None:
+    @staticmethod
+    def _failed(job: Job, answer: PairAnswer) -> MatchedJob:
+        """A pair that will not be estimated, with its failure record for the estimate thread."""
+        now = time.monotonic()
+        return MatchedJob(job, None, None, (now - job.received) * 1e3, now, answer)
+
+    def _publish_answer(self, answer: PairAnswer) -> None:
         """Publish a pair's messages; a failure here (e.g. shutting down) never kills the worker."""
         try:
-            images = None if item is None else item.images
-            self._out.answer(answer, images, self._epipolar_lines)
+            self._out.answer(answer)
         except Exception as err:  # noqa: BLE001 - keep serving
             self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
@@ -490,6 +500,7 @@ class SepfmNode(Node):
     def _estimate_and_publish(self, item: MatchedJob) -> None:
         job = item.job
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
+        assert item.matched is not None  # failures are published as they are
         answer = answer_matched(
             self._pipeline,
             job.headers(),

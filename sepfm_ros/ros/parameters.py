@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -206,9 +207,9 @@ def descriptor(name: str, spec: ParamSpec) -> ParameterDescriptor:
     return desc
 
 
-def parameter_error(name: str, value: Any) -> str | None:
-    """Why ``value`` is not acceptable for parameter ``name`` (None when it is)."""
-    spec = PARAMS.get(name)
+def parameter_error(name: str, value: Any, params: Mapping[str, ParamSpec] = PARAMS) -> str | None:
+    """Why ``value`` is not acceptable for parameter ``name`` of ``params`` (None when it is)."""
+    spec = params.get(name)
     if spec is None:
         return None  # not ours (e.g. use_sim_time, qos overrides)
     if spec.choices:
@@ -233,10 +234,10 @@ def pipeline_config(values: dict[str, Any]) -> PipelineConfig:
     return PipelineConfig(**kwargs, estimator_options=EstimatorOptions(**options))
 
 
-def parameters_help() -> str:
-    """One line per parameter: name, default, range or choices, description."""
+def parameters_help(params: Mapping[str, ParamSpec] = PARAMS) -> str:
+    """One line per parameter of ``params``: name, default, range or choices, description."""
     lines = []
-    for name, spec in PARAMS.items():
+    for name, spec in params.items():
         if spec.choices:
             rng = f" one of {'/'.join(spec.choices)}"
         elif isinstance(spec.default, bool):

@@ -153,6 +153,24 @@ class InputStamps:
             out[topic].append(stamp)
         return out
 
+    @property
+    def counts(self) -> dict[str, int]:
+        """Each topic's number of usable frames (not skipped for their fields)."""
+        return {t: len(v) for t, v in self.stamps.items()}
+
+    @property
+    def skipped_counts(self) -> dict[str, int]:
+        """Each topic's number of frames skipped for unusable fields."""
+        return {t: sum(s[0] == t for s in self.skipped) for t in self.topics}
+
+    def no_pairs_reason(
+        self, spec: InputSpec, frame_gap: int, slop_ns: int | None, slop_flag: str | None
+    ) -> str:
+        """Why these stamps give no pair (:func:`~sepfm_ros.ros.bags.inputs.no_pairs_reason`)."""
+        return no_pairs_reason(
+            spec, self.counts, frame_gap, slop_ns, slop_flag, self.skipped_counts
+        )
+
     def warnings(self, jump_back_s: float) -> list[str]:
         """One line per topic whose stamps repeat, step back or jump back, saying what the
         pairing (the node's) does with them."""
@@ -433,9 +451,8 @@ def run_process(
             )
         total = inputs.pair_count(spec, params, slop_ns)
         if total == 0:
-            frames = {t: len(v) for t, v in inputs.stamps.items()}
             gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
-            raise BagError(no_pairs_reason(spec, frames, gap, slop_ns, flag))
+            raise BagError(inputs.no_pairs_reason(spec, gap, slop_ns, flag))
         has_gt = GROUND_TRUTH_TOPIC in reader.topics
         if has_gt:
             reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))

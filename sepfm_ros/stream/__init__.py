@@ -1,7 +1,8 @@
 """Stream logic of the node and the offline tools, without ROS: which frames pair, when a pair is
 worked on, and how healthy the input is.
 
-Nothing here imports rclpy or a ROS message package (``test/test_stream.py`` checks it), so the
+Nothing here imports rclpy or a ROS message package (``test/stream/test_stream_no_ros.py``
+checks it), so the
 rules are tested without DDS and shared by the live node, ``process``, ``eval --bags`` and
 ``calibration_check``:
 

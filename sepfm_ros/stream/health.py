@@ -69,6 +69,16 @@ class LogThrottle:
         held, self._held[kind] = self._held[kind], 0
         return held
 
+    def message(self, kind: str, text: str, now: float) -> str | None:
+        """``text`` as logged when a message of ``kind`` at ``now`` is let through (with the
+        count held back since the last one and the throttling said), None when held back."""
+        held = self.admit(kind, now)
+        if held is None:
+            return None
+        more = f" [{held} more since the last report]" if held else ""
+        note = f" [logged at most every {self.period_s:.0f} s, counted in /diagnostics]"
+        return text + more + note
+
 
 def percentile(values: Iterable[float], q: float) -> float:
     """q-th percentile of ``values`` (nan when empty)."""

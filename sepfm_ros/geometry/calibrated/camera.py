@@ -131,7 +131,7 @@ def camera_model(
     """
     K = _array(K, (3, 3), "K")
     _check_intrinsics(K, "K")
-    K = K / K[2, 2]
+    K = K / float(K[2, 2])
     D = _array(D, None, "D").reshape(-1)
     model = str(distortion_model or "")
     if model == "" and not np.any(D):

@@ -131,7 +131,9 @@ def _transfer_error(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray) -> np.nda
     return out
 
 
-def parallax_models(H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, pairs: np.ndarray):
+def parallax_models(
+    H: np.ndarray, pts1: np.ndarray, pts2: np.ndarray, pairs: np.ndarray
+) -> np.ndarray:
     """F = [e']_x H for (M, 2) index pairs of off-plane matches -> (M, 3, 3), unit norm.
 
     The epipole e' in image 2 is the intersection of the lines through H x_i and x'_i (the
@@ -269,11 +271,11 @@ def plane_and_parallax(
     if best is None:
         return out
     # polish the best candidate like the estimator polishes its final model
-    options = [best, *iterative_refit(best, data, threshold)]
+    choices = [best, *iterative_refit(best, data, threshold)]
     best_inl = _sed(best, pts1, pts2) < threshold
     if np.count_nonzero(best_inl) >= 8:
-        options.append(fit_least_squares(pts1[best_inl], pts2[best_inl], irls_iterations=5))
-    options = np.ascontiguousarray(np.stack([*options, F]))
+        choices.append(fit_least_squares(pts1[best_inl], pts2[best_inl], irls_iterations=5))
+    options = np.ascontiguousarray(np.stack([*choices, F]))
     option_costs, _ = msac_kernel(options, data.X1, data.X2, threshold)
     k = int(np.argmin(option_costs[:-1]))
     # the last row is the input F; a candidate that fits the plane's matches closer but keeps

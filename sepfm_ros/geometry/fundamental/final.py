@@ -60,7 +60,7 @@ def finish(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> None:
     _final_status(problem, est, plane)
 
 
-def _plane_check(problem: FundamentalTask, est: Estimate, F: np.ndarray):
+def _plane_check(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> PlaneCheck | None:
     """The dominant-plane check of ``F`` (``degeneracy.plane_and_parallax``) when the options ask
     for it, its candidates counted in ``est``; None when it is off."""
     if not problem.checks.plane_check:
@@ -88,16 +88,18 @@ def _periodic_plane_check(problem: FundamentalTask, est: Estimate, check: PlaneC
     ``check`` when there is no such copy, else the check on the other matches, where F is
     always challenged by plane-and-parallax candidates (a wrong F through the plane and its
     copy can gather some chance support off them)."""
-    d, threshold = problem.data, problem.threshold
+    d, threshold, H = problem.data, problem.threshold, check.H
+    if H is None:  # no plane was found: nothing to discount
+        return check
     tol = PLANE_TOLERANCE * threshold  # the plane check's homography tolerance
     inl = d.distances(check.F) < threshold
-    far = transfer_error(check.H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
-    shifted = shifted_plane_copy(check.H, d.pts1, d.pts2, inl & far, tol, problem.rng)
+    far = transfer_error(H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
+    shifted = shifted_plane_copy(H, d.pts1, d.pts2, inl & far, tol, problem.rng)
     if shifted is None and not check.accepted:
         # a copy F does not explain: F may still ignore the parallax (unless its support off
         # the plane is far above chance, when the plane check kept it without a challenge)
         shifted = shifted_plane_copy(
-            check.H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100
+            H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100
         )
     if shifted is None:
         return check
@@ -129,6 +131,7 @@ def _final_status(
         est.set_status(StatusCode.DEGENERATE, f"degenerate: only {k} inliers")
         return
     rng = problem.rng.spawn(1)[0]
+    assert est.F is not None  # set by the callers before the status
     est.log10_nfa = consensus_log10_nfa(est.F, d, est.inliers, threshold, rng)
     chance = None
     if not est.log10_nfa < MAX_LOG10_NFA:

@@ -78,7 +78,17 @@ def inner_sampling(
 
 
 @numba.njit(cache=True, nogil=True)
-def _best_inner_fit(F, x1, x2, X1, X2, T1, T2, drawn, threshold):
+def _best_inner_fit(
+    F: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    X1: np.ndarray,
+    X2: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    drawn: np.ndarray,
+    threshold: float,
+) -> np.ndarray:
     """The least-squares fit (3, 3) of the sample (row of ``drawn`` (S, size), match indices)
     with the lowest MSAC cost at ``threshold`` over all matches (X1, X2: (>=2, N) px; x1, x2:
     (N, 2) normalised). Each fit starts its inverse iteration from F (the samples are F's

@@ -120,7 +120,9 @@ def _compose(U: np.ndarray, sigma: float, V: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True, inline="always")
-def _epipolar_terms(F, x, y, u, v, s1, s2):
+def _epipolar_terms(
+    F: np.ndarray, x: float, y: float, u: float, v: float, s1: float, s2: float
+) -> tuple[float, float, float, float, float, float, float]:
     """(r, l20, l21, l10, l11, q1, q2) of one normalised match (x, y) <-> (u, v) under normalised
     F (3, 3): r = x2^T F x1, l2 = F x1 and l1 = F^T x2 (first two coordinates), q = (s |l|)^2
     (s the normalising scale of the line's image, so e = r (1 / sqrt(q1) + 1 / sqrt(q2)) / 2 px)."""
@@ -136,7 +138,9 @@ def _epipolar_terms(F, x, y, u, v, s1, s2):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
-def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
+def _squared_error_within(
+    F: np.ndarray, x: float, y: float, u: float, v: float, s1: float, s2: float, cap2: float
+) -> float:
     """e^2 (px^2) of one normalised match under normalised F (3, 3), or inf when e^2 >= cap2
     for certain (decided without square roots: e >= |r| / max(s1 |l1|, s2 |l2|)) or an
     epipolar line is undefined."""
@@ -148,7 +152,16 @@ def _squared_error_within(F, x, y, u, v, s1, s2, cap2):
 
 
 @numba.njit(cache=True, nogil=True, fastmath=FAST_MATH)
-def _truncated_pass(F, x1, x2, s1, s2, t2, rows, e_in):
+def _truncated_pass(
+    F: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    s1: float,
+    s2: float,
+    t2: float,
+    rows: np.ndarray,
+    e_in: np.ndarray,
+) -> tuple[float, int]:
     """One pass of normalised F (3, 3) over the matches x1, x2 (n, 2): the truncated cost
     sum min(e_i^2, t2) and, of the m matches with e_i^2 < t2, the rows de_i/dF (row-major F)
     into the columns rows[:, :m] (9, n) and e_i into e_in[:m]. Returns (cost, m).
@@ -343,7 +356,9 @@ def refine_truncated(
 
 
 @numba.njit(cache=True, nogil=True)
-def _noise_truncation_kernel(F, X1, X2, threshold):
+def _noise_truncation_kernel(
+    F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
+) -> float:
     """See :func:`noise_truncation`; X1, X2 (3, N) homogeneous pixels."""
     band = LM_BAND * threshold
     d = distances_within_kernel(F.reshape(1, 3, 3), X1, X2, band)[0]
@@ -370,7 +385,19 @@ def noise_truncation(F: np.ndarray, data: Correspondences, threshold: float) -> 
 
 
 @numba.njit(cache=True, nogil=True)
-def _polish_kernel(model, start, x1, x2, X1, X2, T1, T2, threshold, iterations, model_start):
+def _polish_kernel(
+    model: np.ndarray,
+    start: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    X1: np.ndarray,
+    X2: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    threshold: float,
+    iterations: int,
+    model_start: float,
+) -> np.ndarray:
     """See :func:`polish_local_optimization`."""
     t = _noise_truncation_kernel(start, X1, X2, threshold)
     both = t >= model_start * threshold  # noisy matches: the sample's model is refined too

@@ -7,6 +7,8 @@ solves, scores and refines through this one class, so their comparison is fair.
 
 from __future__ import annotations
 
+from typing import get_args
+
 import numba
 import numpy as np
 
@@ -19,17 +21,29 @@ from sepfm_ros.geometry.epipolar import (
 )
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.nonlinear import polish_local_optimization
+from sepfm_ros.geometry.fundamental.options import LoScheme, Scoring, Solver
 from sepfm_ros.geometry.fundamental.refine import iterative_refit, lmeds_refit
+from sepfm_ros.geometry.robust.contract import Problem
 from sepfm_ros.geometry.robust.lmeds import RobustScale, robust_scale
 from sepfm_ros.geometry.solvers.eight_point import eight_point_kernel
 from sepfm_ros.geometry.solvers.orientation import oriented_consistent
 from sepfm_ros.geometry.solvers.seven_point import seven_point_kernel
 
-SCORINGS = ("msac", "lmeds")
+SCORINGS = get_args(Scoring)
 
 
 @numba.njit(cache=True, nogil=True)
-def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
+def solve_samples_kernel(
+    f1: np.ndarray,
+    f2: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    samples: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    seven: bool,
+    oriented: bool,
+) -> tuple[np.ndarray, np.ndarray]:
     """Minimal (or fixed + sampled) solves of B samples, in one compiled call.
 
     f1, f2: (f, 2) fixed normalised correspondences put in front of every sample; x1, x2: (N, 2)
@@ -76,14 +90,14 @@ def solve_samples_kernel(f1, f2, x1, x2, samples, T1, T2, seven, oriented):
 #: sample's model) at a truncation that follows the matches' noise (a linear refit minimises an
 #: algebraic error);
 #: ``"plain"``: unweighted least squares at 2x and 1x the threshold.
-LO_SCHEMES: dict[str, tuple[tuple[float, ...], int, bool]] = {
+LO_SCHEMES: dict[LoScheme, tuple[tuple[float, ...], int, bool]] = {
     "lm": ((3.0, 2.0, 1.5, 1.0), 2, True),
     "sampson": ((3.0, 2.0, 1.5, 1.0), 2, False),
     "plain": ((2.0, 1.0), 0, False),
 }
 
 
-class FundamentalProblem:
+class FundamentalProblem(Problem):
     """One RANSAC arm estimating F.
 
     Args:
@@ -111,20 +125,20 @@ class FundamentalProblem:
             (:meth:`fixed_inliers`).
         oriented: drop the models for which the sample's own matches break the oriented
             epipolar constraint (``solvers.orientation``), before they are scored.
-        race_share: in a race (``ransac.run_ransac``), the most share of all samples this arm
+        race_share: in a race (``robust.race``), the most share of all samples this arm
             draws while an arm without a share is active (1: no limit).
     """
 
     def __init__(
         self,
         data: Correspondences,
-        solver: str = "seven",
+        solver: Solver = "seven",
         threshold: float = 1.0,
-        scoring: str = "msac",
+        scoring: Scoring = "msac",
         fixed1: np.ndarray | None = None,
         fixed2: np.ndarray | None = None,
         pool: np.ndarray | None = None,
-        lo: str = "lm",
+        lo: LoScheme = "lm",
         scale: RobustScale | None = None,
         lo_data: Correspondences | None = None,
         fixed_tol: float = 0.0,
@@ -163,8 +177,13 @@ class FundamentalProblem:
         #: p of the robust scale: the points that determine a model (fixed ones included)
         self.model_points = 7 if solver == "seven" else 8
         self.scale = scale if scale is not None else RobustScale()
-        if scoring == "lmeds":
-            self.recount = self._recount  # the race re-counts arms when the scale shrinks
+        # lmeds: counts are within the best model's robust scale; the race re-counts the arms
+        # (recount: the size of ``inliers``) when the scale shrinks
+        self.relative_counts = scoring == "lmeds"
+
+    def free_sample_size(self) -> int:
+        """Points of a seven- or eight-point sample, fixed ones included."""
+        return self.model_points
 
     def fixed_inliers(self, model: np.ndarray) -> bool:
         """Whether every fixed correspondence lies within ``fixed_tol`` px (symmetric epipolar
@@ -193,7 +212,7 @@ class FundamentalProblem:
             return msac_kernel(models, self.data.X1, self.data.X2, self.threshold)
         d = self.distances(models)
         cost = np.median(d * d, axis=1)
-        self.scale.update(robust_scale(cost.min(), self.n, self.model_points))
+        self.scale.update(float(robust_scale(cost.min(), self.n, self.model_points)))
         return cost, np.count_nonzero(d < self.scale.threshold, axis=1)
 
     def inliers(self, model: np.ndarray) -> np.ndarray:
@@ -201,10 +220,6 @@ class FundamentalProblem:
         the current robust threshold)."""
         thr = self.scale.threshold if self.scoring == "lmeds" else self.threshold
         return self.data.distances(model) < thr
-
-    def _recount(self, model: np.ndarray) -> int:
-        """lmeds: matches of ``model`` (3, 3) within the current robust inlier threshold."""
-        return int(np.count_nonzero(self.data.distances(model) < self.scale.threshold))
 
     def score_early(
         self,

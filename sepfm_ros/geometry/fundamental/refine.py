@@ -25,7 +25,9 @@ REFIT_FACTORS = (3.0, 1.5, 1.0, 1.0)
 
 
 @numba.njit(cache=True, nogil=True)
-def _weighted_design(x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray, R: np.ndarray):
+def _weighted_design(
+    x1: np.ndarray, x2: np.ndarray, idx: np.ndarray, w: np.ndarray, R: np.ndarray
+) -> None:
     """Write w_k r_k into the columns of R (9, K): the design rows r (:func:`design_row`) of
     the matches idx (K,), weighted by w (K,); x1, x2: (N, 2) normalised coordinates. Their
     Gram matrix (:func:`column_gram`) is sum_k w_k^2 r_k r_k^T."""
@@ -111,7 +113,9 @@ def normalized_model(F: np.ndarray, T1: np.ndarray, T2: np.ndarray) -> np.ndarra
 
 
 @numba.njit(cache=True, nogil=True)
-def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.ndarray):
+def _sampson_weights(
+    F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.ndarray
+) -> np.ndarray:
     """(K,) 1 / ||grad(x2^T F x1)|| (the Sampson denominator) of rows idx, scaled to max 1."""
     K = idx.shape[0]
     g = np.empty(K)
@@ -129,7 +133,15 @@ def _sampson_weights(F_n: np.ndarray, x1: np.ndarray, x2: np.ndarray, idx: np.nd
 
 
 @numba.njit(cache=True, nogil=True)
-def refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
+def refit_kernel(
+    x1: np.ndarray,
+    x2: np.ndarray,
+    idx: np.ndarray,
+    irls_iterations: int,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    start: np.ndarray,
+) -> np.ndarray:
     """Normalised eight-point least squares on rows idx (+ Sampson IRLS); F in px, unit norm.
 
     x1, x2: (N, 2) normalised coordinates (``Correspondences.x1`` / ``x2``); idx: (K,) int
@@ -151,7 +163,18 @@ def refit_kernel(x1, x2, idx, irls_iterations, T1, T2, start) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def _iterative_refit_kernel(F, X1, X2, x1, x2, T1, T2, threshold, factors, irls_iterations):
+def _iterative_refit_kernel(
+    F: np.ndarray,
+    X1: np.ndarray,
+    X2: np.ndarray,
+    x1: np.ndarray,
+    x2: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    threshold: float,
+    factors: np.ndarray,
+    irls_iterations: int,
+) -> np.ndarray:
     """See :func:`iterative_refit`; returns (K, 3, 3) fitted models, K <= len(factors)."""
     t2 = threshold * threshold
     # distances beyond every factor's threshold (and the cost's) only need to be known as such

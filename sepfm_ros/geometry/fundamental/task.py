@@ -15,6 +15,8 @@ from sepfm_ros.geometry.fundamental.options import (
     Checks,
     LocalOptimization,
     Sampling,
+    Scoring,
+    Solver,
 )
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.robust.lmeds import RobustScale
@@ -50,8 +52,8 @@ class FundamentalTask:
     the thresholds, the fundamental side's options and the random generator."""
 
     data: Correspondences
-    solver: str
-    scoring: str
+    solver: Solver
+    scoring: Scoring
     threshold: float
     confidence: float
     sampling: Sampling

@@ -10,7 +10,9 @@ from sepfm_ros.geometry.robust.options import SamplingOptions
 __all__ = ["Sprt", "sprt_threshold"]
 
 
-def sprt_threshold(epsilon: float, delta: float, model_time: float, models_per_sample: float):
+def sprt_threshold(
+    epsilon: float, delta: float, model_time: float, models_per_sample: float
+) -> float:
     """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
     A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
     C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)

@@ -330,8 +330,8 @@ def rank_line_pairs(
     # than the accumulator)
     top = 20 * max_pairs
     hist = np.zeros(N + 1, dtype=np.int64)
-    for c in range(K1 * K2):
-        hist[A[c]] += 1
+    for cell in range(K1 * K2):
+        hist[A[cell]] += 1
     low, above = max(N, min_votes), 0
     while low > min_votes and above + hist[low] < top:
         above += hist[low]

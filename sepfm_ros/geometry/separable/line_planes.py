@@ -44,7 +44,18 @@ def _point_gram(N: np.ndarray, x: np.ndarray, u: np.ndarray, G: np.ndarray, r: n
 
 
 @numba.njit(cache=True, nogil=True)
-def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj, S, h, H) -> float:
+def _pair_plane_error(
+    N: np.ndarray,
+    Gi: np.ndarray,
+    Gj: np.ndarray,
+    xi: np.ndarray,
+    ui: np.ndarray,
+    xj: np.ndarray,
+    uj: np.ndarray,
+    S: np.ndarray,
+    h: np.ndarray,
+    H: np.ndarray,
+) -> float:
     """Larger transfer error (image 2's units) of two matches under the least-squares
     homography H = N h through them (``line_plane_basis``); h is the smallest eigenvector of
     the 4x4 S = Gi + Gj, taken as the adjugate's largest column (S is near singular exactly
@@ -83,7 +94,9 @@ def _pair_plane_error(N, Gi, Gj, xi, ui, xj, uj, S, h, H) -> float:
 
 
 @numba.njit(cache=True, nogil=True)
-def line_plane_degenerate(N, x1, x2, sample, tol) -> bool:
+def line_plane_degenerate(
+    N: np.ndarray, x1: np.ndarray, x2: np.ndarray, sample: np.ndarray, tol: float
+) -> bool:
     """True when some two points of ``sample`` share a plane with the line whose homographies
     span ``N`` (9, 4) (see :func:`line_plane_basis`): both points' transfer errors under the
     pair's least-squares homography below ``tol`` (image 2's normalised units).
@@ -120,7 +133,9 @@ def line_plane_basis(f1: np.ndarray, f2: np.ndarray) -> np.ndarray:
 
 
 @numba.njit(cache=True, nogil=True)
-def plane_free_samples(N, x1, x2, samples, tol) -> np.ndarray:
+def plane_free_samples(
+    N: np.ndarray, x1: np.ndarray, x2: np.ndarray, samples: np.ndarray, tol: float
+) -> np.ndarray:
     """(K,) indices of the rows of (B, k) ``samples`` in which no two points share a plane with
     the line whose homographies span ``N`` (9, 4) (:func:`line_plane_degenerate` at ``tol``,
     image 2's normalised units); x1, x2: (N, 2) normalised coordinates."""

@@ -1,4 +1,4 @@
-"""The separable two-stage method (paper Sec. 4): line pairs, stage 1 (H_e on each line pair,
+"""The separable two-stage method (paper Sec. 5): line pairs, stage 1 (H_e on each line pair,
 as its arm joins), stage 2 (the race of 3 fixed + 4 or 5 sampled arms) and the fallback to
 standard RANSAC from the best model so far."""
 
@@ -106,13 +106,15 @@ def separable(
                 and _periodic(got[0], d.pts1, scales[0])
             )
             stage1_s[0] += time.perf_counter() - t
+            if got is None:
+                continue
             if periodic:
                 est.periodic_line_pairs += 1
                 held.append(got)
                 if problem.ambiguous is None:
                     problem.ambiguous = np.zeros(len(d), dtype=bool)
                 problem.ambiguous[pair.support] = True
-            elif got is not None:
+            else:
                 fits.append(got[0])
                 yield got[1]
         for fit, arm in held:
@@ -137,6 +139,7 @@ def separable(
         est.unfixed_lead = True
     elif fits and result.leader >= 0:
         best = fits[result.leader]
+        assert best is not None  # the unfixed arm's case is above
         est.line_pair = (tuple(best.pair.line1), tuple(best.pair.line2))
         est.line_inliers = best.inliers
         est.H_e = best.H

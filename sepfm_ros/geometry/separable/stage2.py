@@ -1,6 +1,6 @@
 """Stage 2's arm: the fundamental-matrix problem with the line pair's fixed correspondences in
-every sample (paper Sec. 4: 3 fixed + 4 sampled, seven-point; or + 5, eight-point), and the
-optional in-sample plane check of :mod:`~sepfm_ros.geometry.separable.line_planes`."""
+every sample (paper Sec. 5, step two: 3 fixed + 4 sampled, seven-point; or + 5, eight-point),
+and the optional in-sample plane check of :mod:`~sepfm_ros.geometry.separable.line_planes`."""
 
 from __future__ import annotations
 

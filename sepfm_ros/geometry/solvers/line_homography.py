@@ -63,7 +63,7 @@ def transfer(H: np.ndarray, t: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------------------------------
-# Scalar kernels for the compiled stage-1 loop (line_homography_fit.stage1_ransac).
+# Scalar kernels for the compiled stage-1 loop (separable.stage1.stage1_ransac).
 # H is held as h = (a, b, c, d) for [[a, b], [c, d]].
 # --------------------------------------------------------------------------------------------
 

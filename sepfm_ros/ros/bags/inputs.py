@@ -193,18 +193,25 @@ def no_pairs_reason(
     frame_gap: int,
     slop_ns: int | None,
     slop_flag: str | None,
+    skipped: dict[str, int] | None = None,
 ) -> str:
     """Why the input topics give no pair, for the error of a command that found none.
 
     Args:
         spec: the input topics.
-        frames: frames read per input topic (after nothing was skipped: the bag's counts).
+        frames: usable frames per input topic.
         frame_gap: motion pairs frame t - ``frame_gap`` with frame t.
         slop_ns: the stereo pairing slop (ns), None in motion.
         slop_flag: how the user sets the slop (``-p sync_slop_s:=SECONDS``, ``--sync-slop``;
             None: the command has no way).
+        skipped: frames per topic skipped for unusable fields (as the node skips them).
     """
-    counts = ", ".join(f"{t} has {frames.get(t, 0)} frame(s)" for t in spec.topics)
+    skipped = skipped or {}
+    counts = ", ".join(
+        f"{t} has {frames.get(t, 0)} frame(s)"
+        + (f" ({skipped[t]} more skipped: unusable fields)" if skipped.get(t) else "")
+        for t in spec.topics
+    )
     if spec.mode == "stereo":
         if min(frames.get(t, 0) for t in spec.topics) == 0:
             return (

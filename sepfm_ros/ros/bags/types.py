@@ -36,7 +36,8 @@ def sepfm_msgs_share() -> Path | None:
     spec = importlib.util.find_spec(SEPFM_MSGS)
     if spec is None or spec.origin is None or not Path(spec.origin).is_file():
         return None
-    for folder in Path(spec.origin).resolve().parents:
+    # not resolved: a symlinked install (colcon --symlink-install) points into the build folder
+    for folder in Path(spec.origin).absolute().parents:
         share = folder / "share" / SEPFM_MSGS
         if (share / "package.xml").is_file():
             return share
@@ -64,8 +65,6 @@ register_sepfm_msgs(TYPESTORE)
 
 IMAGE = "sensor_msgs/msg/Image"
 COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
-TWO_VIEW_ESTIMATE = "sepfm_msgs/msg/TwoViewEstimate"
-MATCH_ARRAY = "sepfm_msgs/msg/MatchArray"
 DIAGNOSTIC_ARRAY = "diagnostic_msgs/msg/DiagnosticArray"
 DIAGNOSTIC_STATUS = "diagnostic_msgs/msg/DiagnosticStatus"
 TRANSFORM_STAMPED = "geometry_msgs/msg/TransformStamped"

@@ -1,0 +1,37 @@
+"""benchmarks/bench_ablation.py on two shared pairs: one row per configuration and anchor, with
+figures in range, and the docs it writes (its section of docs/benchmarks.md)."""
+
+from __future__ import annotations
+
+import re
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
+import bench_ablation  # noqa: E402
+import bench_docs  # noqa: E402
+
+from sepfm_ros.geometry import DEFAULT_METHOD  # noqa: E402
+
+
+def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path, capsys):
+    doc = tmp_path / "benchmarks.md"
+    doc.write_text(bench_docs.empty_document())
+    argv = ["--sets", "shared", "--step", "100", "--write-docs", "--doc", str(doc)]
+    assert bench_ablation.main(argv) == 0
+    out = capsys.readouterr().out
+    assert "(2 pairs: every 100th of pairs.json; seed 0)" in out
+    labels = [f"{DEFAULT_METHOD} (default)"] + [k for k in bench_ablation.CONFIGS if k != "default"]
+    labels += bench_ablation.ANCHORS
+    for label in labels:
+        row = re.search(rf"^\| {re.escape(label)} \| (\S+) \| (\S+) \| (\S+) \| (\S+) \| (\S+) \|$",
+                        out, re.M)  # fmt: skip
+        assert row, label
+        f, success = float(row.group(1)), float(row.group(2))
+        assert 0.0 <= f <= 1.0 and 0.0 <= success <= 100.0
+        assert float(row.group(4)) > 0
+    assert re.search(r"^\| cv-magsac \| .* \| 1\.00 \|$", out, re.M)
+    body = bench_docs.read_block(doc.read_text(), "bench_ablation")
+    assert body.startswith(f"## Ablation of the default method ({DEFAULT_METHOD})")
+    assert "Not generated yet" in bench_docs.read_block(doc.read_text(), "bench_estimators")
+    assert f"| {DEFAULT_METHOD} (default) |" in body

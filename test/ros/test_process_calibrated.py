@@ -1,0 +1,112 @@
+"""``process`` on a robot's stereo bag with camera_info (written with rosbags alone): the relative
+pose and the calibration check are written like the node publishes them; a rig whose right
+camera turned by 1 degree is flagged; without camera_info no such topic is written."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+from rclpy.serialization import deserialize_message
+from robot_bags import bag_path, write_robot_bag
+
+from sepfm_msgs.msg import TwoViewEstimate
+from sepfm_ros.geometry.calibrated.pose import pose_from_projections
+from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.messages import stamp_ns
+from sepfm_ros.ros.process import parse_params, run_process
+from sepfm_ros.ros.results import read_results
+
+N = 8
+TOPICS = ("/sepfm/relative_transform", "/sepfm/calibration_check")
+
+
+@pytest.fixture(scope="module")
+def kitti(shared_data):
+    cams = json.loads((shared_data / "cameras.json").read_text())
+    P_l = np.asarray(cams["kitti_seq2/left/000000.png"])
+    P_r = np.asarray(cams["kitti_seq2/right/000000.png"])
+    K, _, R, t = pose_from_projections(P_l, P_r)
+    frames = []
+    for i in range(N):
+        pair = [
+            cv2.imread(str(shared_data / f"kitti_seq2/{side}/{i:06d}.png"), cv2.IMREAD_GRAYSCALE)
+            for side in ("left", "right")
+        ]
+        frames.append(tuple(pair))
+    return K, float(np.linalg.norm(t)), frames
+
+
+def _outputs(out):
+    from diagnostic_msgs.msg import DiagnosticStatus
+    from geometry_msgs.msg import TransformStamped
+
+    with BagReader(out) as reader:
+        poses = [
+            deserialize_message(r.data, TransformStamped) for r in reader.messages([TOPICS[0]])
+        ]
+        checks = [
+            deserialize_message(r.data, DiagnosticStatus) for r in reader.messages([TOPICS[1]])
+        ]
+    return poses, checks
+
+
+def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_path):
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, K=K, baseline_m=baseline)
+    done, total = run_process(bag, tmp_path / "out", parse_params([]), progress=False)
+    assert done == total == N
+    poses, checks = _outputs(tmp_path / "out")
+    assert len(poses) >= N - 1 and len(checks) == N
+    for tf in poses:
+        assert tf.header.frame_id == "left_camera_optical_frame"
+        assert tf.child_frame_id == "right_camera_optical_frame"
+        p = tf.transform.translation
+        # the right camera sits one calibrated baseline to the right (+x) of the left one
+        assert np.linalg.norm([p.x, p.y, p.z]) == pytest.approx(baseline, rel=1e-6)
+        assert p.x > 0.9 * baseline
+    assert checks[-1].name == "sepfm: calibration"
+    assert checks[-1].level == b"\x00", checks[-1].message  # OK
+    # ~/estimate carries the same pose, metric, in undistorted pixels of K
+    estimates = {
+        stamp_ns(r.estimate.header.stamp): r.estimate for r in read_results(tmp_path / "out")
+    }
+    for tf in poses:
+        est = estimates[stamp_ns(tf.header.stamp)]
+        assert est.pose == tf.transform and est.pose_kind == TwoViewEstimate.POSE_METRIC
+        assert est.coordinates == "undistorted" and est.pose_status == "ok"
+
+
+def test_process_on_rectified_images_says_so(kitti, tmp_path):
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames[:2], K=K, baseline_m=baseline)
+    run_process(bag, tmp_path / "out", parse_params(["images:=rectified"]), progress=False)
+    results = read_results(tmp_path / "out")
+    assert len(results) == 2
+    for r in results:
+        assert r.estimate.coordinates == "rectified" and r.F is not None
+
+
+def test_process_flags_a_decalibrated_rig(kitti, tmp_path):
+    K, baseline, frames = kitti
+    R = cv2.Rodrigues(np.array([np.radians(1.0), 0.0, 0.0]))[0]
+    H = K @ R @ np.linalg.inv(K)
+    size = frames[0][1].shape[::-1]
+    turned = [(left, cv2.warpPerspective(right, H, size)) for left, right in frames]
+    bag = write_robot_bag(
+        bag_path(tmp_path, "sqlite3"), "sqlite3", turned, K=K, baseline_m=baseline
+    )
+    run_process(bag, tmp_path / "out", parse_params([]), progress=False)
+    _, checks = _outputs(tmp_path / "out")
+    assert checks[-1].level in (b"\x01", b"\x02"), checks[-1].message  # WARN or ERROR
+
+
+def test_without_camera_info_no_calibrated_topics(kitti, tmp_path):
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames[:3], K=K, baseline_m=baseline)
+    out = tmp_path / "out"
+    run_process(bag, out, parse_params(["use_camera_info:=false"]), progress=False)
+    with BagReader(out) as reader:
+        assert not set(TOPICS) & set(reader.topics)

@@ -37,6 +37,8 @@ REPO = Path(__file__).resolve().parent.parent
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
 ANSWER_TIMEOUT = 60.0  # s; generous: the machine is shared and 2-core
 SETTLE_TIMEOUT = 120.0  # s; a loaded 2-core machine can take seconds per pair
+# s; a node loading (or, after a source change, compiling) its kernels on a loaded machine
+STARTUP_TIMEOUT = 120.0
 
 
 # --------------------------------------------------------------------------- node subprocess
@@ -157,7 +159,7 @@ class Client:
         self.ros.node.destroy_subscription(self._debug_sub)
         self._debug_sub = None
 
-    def wait_connected(self, timeout: float = 30.0) -> None:
+    def wait_connected(self, timeout: float = STARTUP_TIMEOUT) -> None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             inputs = all(p.get_subscription_count() > 0 for p in self.pubs.values())

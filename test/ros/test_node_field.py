@@ -418,10 +418,11 @@ def test_lagging_right_camera_warns_with_offset_then_pairs_nearest(
             stamps.append((k, stamp))
             send_pair(client, image_msg(left, stamp), image_msg(right, stamp + lag))
         client.wait_info(stamps[-1][1])  # reliable: the newest pair is always answered
-        answered, formed, dropped = client.wait_settled(before, [s for _, s in stamps])
-        # each pair formed once the slop allows, answered or (the node behind on a loaded
-        # machine) dropped and counted
-        assert formed == len(stamps) and len(answered) + dropped == formed, (answered, dropped)
+        # pairs formed since the slop changed (a frame left waiting from before may pair too):
+        # each answered or, the node behind on a loaded machine, dropped and counted
+        sent = [T0 + k * period for k in range(15 + len(KITTI))]
+        answered, formed, dropped = client.wait_settled(before, sent)
+        assert formed >= len(stamps) and len(answered) + dropped == formed, (answered, dropped)
         for k, stamp in stamps:
             if stamp not in answered:
                 continue

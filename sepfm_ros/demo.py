@@ -2,10 +2,13 @@
 
 Starts the ``sepfm`` node as a subprocess, replays a bundled bag (``bags/synthetic_stereo`` by
 default: a rendered scene with exact ground truth) into it over DDS at the recorded rate (and
-reliable, whatever QoS the bag recorded: large best-effort frames are lost on this host), records
-the node's outputs into a bag, then prints a per-frame table (stamp, matches, inliers, hypotheses,
-error against ground truth) and writes the node's debug image of one frame as a PNG. All of it
-stays on this machine: a random ``ROS_DOMAIN_ID`` and localhost-only discovery unless set.
+reliable, whatever QoS the bag recorded: large best-effort frames are lost on this host), each
+pair's frames held back until the node has answered the pair before (a node that falls behind
+passes over stale pairs, by design; the demo shows a row for every pair, so on a busy machine it
+replays slower than recorded), records the node's outputs into a bag, then prints a per-frame
+table (stamp, matches, inliers, hypotheses, error against ground truth) and writes the node's
+debug image of one frame as a PNG. All of it stays on this machine: a random ``ROS_DOMAIN_ID``
+and localhost-only discovery unless set.
 
     sepfm_ros demo [--bag BAG] [--out DIR] [--rate R] [-p NAME:=VALUE ...]
 """
@@ -13,6 +16,7 @@ stays on this machine: a random ``ROS_DOMAIN_ID`` and localhost-only discovery u
 from __future__ import annotations
 
 import argparse
+import bisect
 import os
 import random
 import signal
@@ -20,6 +24,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -27,7 +32,7 @@ import cv2
 import numpy as np
 
 from sepfm_ros.ros.bags.errors import BagError
-from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import check_output_path
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -84,13 +89,17 @@ def replay_through_node(
     progress: bool = True,
     log_path: Path | None = None,
     startup_timeout_s: float = 120.0,
-    drain_timeout_s: float = 10.0,
+    answer_timeout_s: float = 120.0,
 ) -> LiveRun:
     """Replay ``bag`` into a fresh ``sepfm`` node subprocess and record its outputs to ``out``.
 
     ``params`` are extra node parameters (``name:=value``); mode and transport follow the bag.
     The ROS environment (ROS_DOMAIN_ID) of this process is used for the node too. The node
     runs at its default settings: its subscriptions take the player's (recorded) reliability.
+    Paced by answers: a message is published at its recorded time (scaled by ``rate``) or, when
+    later, once the node answered every pair completed before it, so every pair is answered
+    however busy the machine; a pair still unanswered after ``answer_timeout_s`` seconds
+    without any new answer is given up (it lacks a row).
     """
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
@@ -98,7 +107,7 @@ def replay_through_node(
 
     from sepfm_ros.ros.bags.inputs import camera_info_topics
     from sepfm_ros.ros.bags.writer import BagWriter
-    from sepfm_ros.ros.process import detect_inputs, expected_pairs, parse_params
+    from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params
     from sepfm_ros.ros.record import Recorder
     from sepfm_ros.ros.replay import Replayer
     from sepfm_ros.ros.results import calibrated_topics, output_topics
@@ -107,7 +116,9 @@ def replay_through_node(
     check_output_path(out)
     with BagReader(bag) as reader:
         spec = detect_inputs(reader)
-        expected = expected_pairs(reader, spec, parse_params(params))
+        # log time (ns) of the message completing each pair the node forms (its pairing)
+        completions = [job.log_time_ns for job in iter_pairs(reader, spec, parse_params(params))]
+    expected = len(completions)
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
     for p in params:
         cmd += ["-p", p]
@@ -141,6 +152,12 @@ def replay_through_node(
 
     spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
+    answers = Answers(recorder.counts, list(output_topics().values()), node_proc, answer_timeout_s)
+
+    def hold(msg: RawMessage) -> None:
+        """Before ``msg``: the node's answers to every pair completed before it."""
+        answers.wait(bisect.bisect_left(completions, msg.log_time_ns))
+
     replayer = None
     published = 0
     try:
@@ -166,16 +183,9 @@ def replay_through_node(
                 raise BagError("the node did not match the player and recorder within the timeout")
             time.sleep(0.05)
         time.sleep(0.2)
-        published = replayer.run(progress=progress)
-        info_topic = output_topics()["estimate"]
-        last, last_count = time.monotonic(), -1
-        while recorder.counts[info_topic] < expected:
-            if recorder.counts[info_topic] != last_count:
-                last, last_count = time.monotonic(), recorder.counts[info_topic]
-            if time.monotonic() - last > drain_timeout_s:
-                break
-            time.sleep(0.05)
-        time.sleep(0.3)  # let the last matches/debug image of the final pair arrive
+        published = replayer.run(progress=progress, hold=hold)
+        answers.wait(expected)
+        time.sleep(0.3)  # let the debug image of the final pair arrive (drawn after the answer)
     finally:
         if node_proc.poll() is None:
             node_proc.send_signal(signal.SIGINT)
@@ -194,6 +204,47 @@ def replay_through_node(
         if log is not subprocess.DEVNULL:
             log.close()
     return LiveRun(expected, published, dict(recorder.counts), node_proc.returncode, out)
+
+
+class Answers:
+    """The node's answers as the recorder counts them: wait for a number of them.
+
+    Args:
+        counts: the recorder's messages per topic (updated by the spinning thread).
+        topics: the topics each answer has one message on (the estimate and the matches).
+        node_proc: the node subprocess (waiting ends when it exits).
+        timeout_s: a wait gives up after this many seconds without a new answer; the pairs then
+            missing are not waited for again.
+    """
+
+    def __init__(
+        self,
+        counts: Mapping[str, int],
+        topics: Sequence[str],
+        node_proc: subprocess.Popen,
+        timeout_s: float,
+    ) -> None:
+        self._counts = counts
+        self._topics = list(topics)
+        self._node = node_proc
+        self._timeout_s = timeout_s
+        self._given_up = 0  # pairs never answered (waits that timed out)
+
+    def answered(self) -> int:
+        """Pairs whose estimate and matches both arrived."""
+        return min(self._counts[t] for t in self._topics)
+
+    def wait(self, pairs: int) -> None:
+        """Block until ``pairs`` pairs (less those given up before) are answered, the node has
+        exited, or ``timeout_s`` passed without a new answer."""
+        last, seen = time.monotonic(), self.answered()
+        while (done := self.answered()) < pairs - self._given_up and self._node.poll() is None:
+            if done != seen:
+                last, seen = time.monotonic(), done
+            elif time.monotonic() - last > self._timeout_s:
+                self._given_up = pairs - done
+                return
+            time.sleep(0.02)
 
 
 def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:

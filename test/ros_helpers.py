@@ -35,7 +35,10 @@ from sepfm_ros.ros.typed_msgs import fundamental_from_msg
 
 REPO = Path(__file__).resolve().parent.parent
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
-ANSWER_TIMEOUT = 30.0  # s; generous: the machine is shared and 2-core
+ANSWER_TIMEOUT = 60.0  # s; generous: the machine is shared and 2-core
+SETTLE_TIMEOUT = 120.0  # s; a loaded 2-core machine can take seconds per pair
+# s; a node loading (or, after a source change, compiling) its kernels on a loaded machine
+STARTUP_TIMEOUT = 120.0
 
 
 # --------------------------------------------------------------------------- node subprocess
@@ -156,7 +159,7 @@ class Client:
         self.ros.node.destroy_subscription(self._debug_sub)
         self._debug_sub = None
 
-    def wait_connected(self, timeout: float = 30.0) -> None:
+    def wait_connected(self, timeout: float = STARTUP_TIMEOUT) -> None:
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             inputs = all(p.get_subscription_count() > 0 for p in self.pubs.values())
@@ -217,6 +220,38 @@ class Client:
                     return self.health[-1]
             time.sleep(0.05)
         raise AssertionError(f"no /diagnostics report from {self.node_name}")
+
+    def wait_settled(
+        self, before: dict[str, str], stamps: list[int], timeout: float = SETTLE_TIMEOUT
+    ) -> tuple[list[int], int, int]:
+        """Wait until every pair the node formed since its /diagnostics report ``before`` is
+        answered here (one of ``stamps``) or was dropped by the node (a newer pair replaced it;
+        counted). Returns (the ``stamps`` answered, pairs formed, pairs dropped) since
+        ``before``: how many are dropped depends on the machine's load, so a test checks the
+        answers that came and that no pair went unaccounted, not how many came in time.
+
+        Call it after the last input was sent; a reliable input's newest pair is always
+        answered, so wait for its answer first (``wait_info``), or the report may come before
+        the last inputs reached the node. Fails after ``timeout`` s.
+        """
+        deadline = time.monotonic() + timeout
+        last_formed = None
+        while True:
+            report = self.latest_health(after=0.0, timeout=timeout)
+            formed, dropped = (
+                int(report[key]) - int(before[key])
+                for key in ("synchronized_pairs", "dropped_pairs")
+            )
+            with self.lock:
+                answered = [s for s in stamps if s in self.info]
+            # settled, and no pair formed since the report before (inputs still arriving)
+            if len(answered) + dropped >= formed and formed == last_formed:
+                return answered, formed, dropped
+            last_formed = formed
+            if time.monotonic() > deadline:
+                raise AssertionError(
+                    f"{formed} pairs formed, {len(answered)} answered, {dropped} dropped"
+                )
 
     def call(self, client, request, timeout: float = 10.0):
         future = client.call_async(request)

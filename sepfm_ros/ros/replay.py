@@ -33,7 +33,7 @@ import importlib
 import sys
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -46,7 +46,7 @@ from tqdm import tqdm
 
 from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError, UnknownTypeError
 from sepfm_ros.ros.bags.inputs import COMPRESSED_SUFFIX, NODE_INPUTS, detect_inputs
-from sepfm_ros.ros.bags.reader import BagReader, StampChecker
+from sepfm_ros.ros.bags.reader import BagReader, RawMessage, StampChecker
 from sepfm_ros.ros.bags.types import IMAGE, has_header, header_stamp_ns
 from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 
@@ -299,8 +299,13 @@ class Replayer:
             self._clock_pub.publish(msg)
             time.sleep(period)
 
-    def run(self, progress: bool = True) -> int:
-        """Play (blocking); returns the number of messages published."""
+    def run(self, progress: bool = True, hold: Callable[[RawMessage], None] | None = None) -> int:
+        """Play (blocking); returns the number of messages published.
+
+        ``hold``: called with each message when its time has come, just before it is published;
+        it may block (the demo waits there for the node's answer to the pair before), and the
+        messages after it are then published as soon as their time has come.
+        """
         published = 0
         base_wall = [time.monotonic()]
         clock_thread = None
@@ -329,6 +334,8 @@ class Replayer:
                         if delay <= 0:
                             break
                         time.sleep(min(delay, 0.05))
+                    if hold is not None and not self._stop.is_set():
+                        hold(msg)
                     if self._stop.is_set():
                         break
                     self.publishers[msg.topic].publish(msg.data)

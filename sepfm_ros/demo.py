@@ -27,6 +27,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -34,6 +35,9 @@ import numpy as np
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import check_output_path
+
+if TYPE_CHECKING:
+    from sepfm_ros.ros.replay import Replayer
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 DEFAULT_BAG = "synthetic_stereo"
@@ -135,7 +139,7 @@ def replay_through_node(
     writer = BagWriter(out, flush_interval_s=1.0)
     recorder = Recorder(node, writer, topics)
     # the node's own counts of matched input publishers and output subscribers (/diagnostics)
-    node_matched = {"input_publishers": 0, "output_subscribers": 0}
+    node_matched = {"input_publishers": 0, "output_subscribers": 0, "camera_info_ready": 0}
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
@@ -182,6 +186,14 @@ def replay_through_node(
             if time.monotonic() > deadline:
                 raise BagError("the node did not match the player and recorder within the timeout")
             time.sleep(0.05)
+        if infos:
+            # a camera driver publishes camera_info all along: the node has it before the first
+            # pair, as `process` has (the bag may hold a frame's image before its camera_info)
+            prime_camera_info(replayer, bag, infos)
+            while node_matched["camera_info_ready"] < 1:
+                if time.monotonic() > deadline:
+                    raise BagError("the node did not receive camera_info within the timeout")
+                time.sleep(0.05)
         time.sleep(0.2)
         published = replayer.run(progress=progress, hold=hold)
         answers.wait(expected)
@@ -204,6 +216,19 @@ def replay_through_node(
         if log is not subprocess.DEVNULL:
             log.close()
     return LiveRun(expected, published, dict(recorder.counts), node_proc.returncode, out)
+
+
+def prime_camera_info(replayer: Replayer, bag: Path, topics: Sequence[str]) -> None:
+    """Publish the first camera_info message of each of ``topics`` from ``bag`` through the
+    replayer's publishers (before the replay itself)."""
+    first: dict[str, bytes] = {}
+    with BagReader(bag) as reader:
+        for msg in reader.messages(list(topics)):
+            first.setdefault(msg.topic, msg.data)
+            if len(first) == len(topics):
+                break
+    for topic, data in first.items():
+        replayer.publishers[topic].publish(data)
 
 
 class Answers:

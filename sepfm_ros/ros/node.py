@@ -530,6 +530,10 @@ class SepfmNode(Node):
         for sub, name in zip(self._subs, self._health.topics, strict=True):
             values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
         values["dds_input_transport"] = self._dds.describe()
+        if self._camera_info is not None:
+            # 1 once every camera's camera_info has arrived (a player can wait for it before the
+            # first images, so the first pair is answered with the calibration too)
+            values["camera_info_ready"] = int(self._camera_info.latest() is not None)
         # subscribers matched by the result publishers (the fewest over estimate and matches) and by
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())

@@ -23,11 +23,8 @@ results equal offline processing. docs/design.md gives the reasons and measureme
 
 from __future__ import annotations
 
-import functools
 import threading
 import time
-import traceback
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,6 +62,7 @@ from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.image_conversion import ZeroStepNotes
+from sepfm_ros.ros.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.memory import (
     release_free_memory,
 )
@@ -84,14 +82,12 @@ from sepfm_ros.ros.parameters import (
     pipeline_config,
 )
 from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
-from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health, LogThrottle
+from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health
 from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
 from sepfm_ros.stream.scheduling import PairScheduler
 from sepfm_ros.stream.sync import LEFT, RIGHT
 
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
-# A recurring problem of one kind is logged at most once per this many seconds.
-LOG_THROTTLE_S = 10.0
 
 
 @dataclass
@@ -122,23 +118,6 @@ class MatchedJob:
     wait_ms: float  # receipt -> start of processing (decode)
     matched_at: float  # time.monotonic() when matching ended
     failure: PairAnswer | None = None
-
-
-def guarded(callback: Callable[..., None]) -> Callable[..., None]:
-    """An executor callback that never raises: an exception is counted as an internal error
-    (ERROR level in /diagnostics) and logged, and the executor keeps serving."""
-
-    @functools.wraps(callback)
-    def run(self: SepfmNode, *args: Any) -> None:
-        try:
-            callback(self, *args)
-        except Exception as err:  # noqa: BLE001 - a long-running node keeps serving
-            kind = f"internal_{type(err).__name__}"
-            self._health.problem(kind)
-            text = f"{callback.__name__}: " + "".join(traceback.format_exception(err))
-            self._log_throttled(kind, text)
-
-    return run
 
 
 class SepfmNode(Node):
@@ -176,7 +155,7 @@ class SepfmNode(Node):
         )
         names = ("left", "right") if self._mode == "stereo" else ("image",)
         self._health = Health(names, float(values["input_timeout_s"]))
-        self._throttle = LogThrottle(LOG_THROTTLE_S)
+        self._log = ThrottledLog(self)
         self._reported_stall: str | None = None
         self._pending_monitor: MonitorConfig | None = None
 
@@ -273,24 +252,15 @@ class SepfmNode(Node):
         )
 
     # ---------------------------------------------------------------- input callbacks
-    def _log_throttled(self, kind: str, text: str, error: bool = True) -> None:
-        """Log ``text`` unless a message of ``kind`` was logged in the last LOG_THROTTLE_S."""
-        with self._lock:
-            held = self._throttle.admit(kind, time.monotonic())
-        if held is None:
-            return
-        more = f" [{held} more since the last report]" if held else ""
-        note = f" [logged at most every {LOG_THROTTLE_S:.0f} s, counted in /diagnostics]"
-        # one call site per severity: rclpy refuses another severity at the same call site
-        if error:
-            self.get_logger().error(text + more + note)
-        else:
-            self.get_logger().warning(text + more + note)
+    def internal_error(self, kind: str, text: str) -> None:
+        """An exception in a callback (:func:`guarded`): ERROR level in /diagnostics, logged."""
+        self._health.problem(kind)
+        self._log.log(kind, text)
 
     def _bad_input(self, kind: str, text: str) -> None:
         """Count a bad message by kind and log it (throttled per kind)."""
         self._health.problem(kind)
-        self._log_throttled(kind, f"skipping bad input ({kind}): {text}")
+        self._log.log(kind, f"skipping bad input ({kind}): {text}")
 
     @guarded
     def _on_lost(self, topic: str, count: int) -> None:
@@ -298,14 +268,14 @@ class SepfmNode(Node):
             return
         self._health.lost_samples(topic, count)
         advice = self._dds.lost_sample_advice()
-        self._log_throttled(
+        self._log.log(
             "lost_samples", f"{count} samples of {topic} lost in transport: {advice}", error=False
         )
 
     @guarded
     def _on_incompatible(self, topic: str, policy: str) -> None:
         self._health.problem("incompatible_qos")
-        self._log_throttled(
+        self._log.log(
             "incompatible_qos",
             f"a publisher of {topic} has an incompatible QoS ({policy}) and is not received; "
             "restart the node with input_reliability:=best_effort to receive every publisher",
@@ -333,7 +303,7 @@ class SepfmNode(Node):
         self._health.stamp_jump()
         self._health.restart_pairing()
         self._scheduler.reset_input()
-        self._log_throttled(
+        self._log.log(
             "stamp_jump",
             f"{topic} stamps jumped back to {stamp / 1e9:.3f} s (a looped bag, a restarted "
             "driver or simulator): pairing restarted from this frame",
@@ -483,7 +453,7 @@ class SepfmNode(Node):
             return
         if update.error is not None:
             self._health.problem("camera_info_invalid")
-            self._log_throttled("camera_info_invalid", f"camera_info unusable: {update.reason}")
+            self._log.log("camera_info_invalid", f"camera_info unusable: {update.reason}")
         elif update.changed:
             calibration = self._calibrated.calibration
             self.get_logger().info(

@@ -33,12 +33,8 @@ are counted as ``waiting``.
 from __future__ import annotations
 
 import argparse
-import functools
 import threading
-import time
-import traceback
 from collections import Counter, OrderedDict
-from collections.abc import Callable
 from dataclasses import replace
 from typing import Any
 
@@ -67,6 +63,7 @@ from sepfm_ros.ros.image_conversion import (
     numpy_to_image,
     pair_to_numpy,
 )
+from sepfm_ros.ros.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.messages import copy_header, diagnostic_array, health_status, stamp_ns
 from sepfm_ros.ros.node_main import spin_until_shutdown
 from sepfm_ros.ros.parameters import (
@@ -80,12 +77,10 @@ from sepfm_ros.ros.parameters import (
 )
 from sepfm_ros.ros.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.typed_msgs import fundamental_from_msg
-from sepfm_ros.stream.health import LogThrottle
 from sepfm_ros.stream.pairing import Frame, StereoPairing
 from sepfm_ros.stream.sync import LEFT, RIGHT
 
 NODE_NAME = "rectify"
-LOG_THROTTLE_S = 10.0
 # estimates (or match arrays) kept while their other half has not arrived
 PENDING_ESTIMATES = 20
 
@@ -117,24 +112,6 @@ _PARAMS: dict[str, ParamSpec] = {
 }
 # the rectifier's parameters are all read-only (set at start)
 PARAMS = {name: replace(spec, read_only=True) for name, spec in _PARAMS.items()}
-
-
-def guarded(callback: Callable[..., None]) -> Callable[..., None]:
-    """An executor callback that never raises: an exception is counted as an internal error
-    and logged (throttled), and the executor keeps serving."""
-
-    @functools.wraps(callback)
-    def run(self: RectifyNode, *args: Any) -> None:
-        try:
-            callback(self, *args)
-        except Exception as err:  # noqa: BLE001 - a long-running node keeps serving
-            kind = f"internal_{type(err).__name__}"
-            self.count(kind)
-            self.log_throttled(
-                kind, f"{callback.__name__}: " + "".join(traceback.format_exception(err))
-            )
-
-    return run
 
 
 def inlier_points(matches: MatchArray) -> tuple[np.ndarray, np.ndarray]:
@@ -192,7 +169,7 @@ class RectifyNode(Node):
             raise ValueError("invalid parameters: " + "; ".join(errors))
         self._encoding = str(self._values["encoding"])
         self._lock = threading.Lock()
-        self._throttle = LogThrottle(LOG_THROTTLE_S)
+        self._log = ThrottledLog(self)
         self.counts: Counter[str] = Counter()  #: events by kind (also in /diagnostics)
         self.rectification: Rectification | None = None  #: the homographies in use
         self._rect_stamp_ns: int | None = None
@@ -240,21 +217,13 @@ class RectifyNode(Node):
         with self._lock:
             self.counts[kind] += n
 
-    def log_throttled(self, kind: str, text: str, error: bool = True) -> None:
-        """Log ``text`` unless a message of ``kind`` was logged in the last LOG_THROTTLE_S."""
-        with self._lock:
-            line = self._throttle.message(kind, text, time.monotonic())
-        # one call site per severity: rclpy refuses another severity at the same call site
-        if line is None:
-            return
-        if error:
-            self.get_logger().error(line)
-        else:
-            self.get_logger().warning(line)
-
     def _problem(self, kind: str, text: str, error: bool = True) -> None:
         self.count(kind)
-        self.log_throttled(kind, text, error)
+        self._log.log(kind, text, error)
+
+    def internal_error(self, kind: str, text: str) -> None:
+        """An exception in a callback (:func:`guarded`): counted, logged."""
+        self._problem(kind, text)
 
     @guarded
     def _on_lost(self, topic: str, n: int) -> None:

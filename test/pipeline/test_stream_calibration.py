@@ -36,7 +36,21 @@ def test_camera_info_equal_to_rounding_keeps_the_window():
     assert calib.update(*rig())
     # the same calibration recomputed per message (last digits differ): not a change
     assert not calib.update(*rig(fx_noise=1e-10))
-    # a real change (another focal length): the check starts afresh
+    # ... or recomputed in single precision by the driver
+    single = [
+        camera_model(
+            *(np.float32(getattr(m, f)).astype(np.float64).ravel() for f in ("K", "D")),
+            "plumb_bob",
+            *(np.float32(getattr(m, f)).astype(np.float64).ravel() for f in ("R", "P")),
+            640,
+            480,
+        )
+        for m in rig(fx_noise=1.0 / 3.0)
+    ]
+    assert calib.update(*rig(fx_noise=1.0 / 3.0))
+    assert not calib.update(*single)
+    # a real change (another focal length, a hundredth of a pixel): the check starts afresh
+    assert calib.update(*rig(fx_noise=0.01))
     assert calib.update(*rig(fx_noise=0.5))
 
 

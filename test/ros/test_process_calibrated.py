@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 from rclpy.serialization import deserialize_message
 from robot_bags import bag_path, write_robot_bag
+from sensor_msgs.msg import CameraInfo
 
 from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections
+from sepfm_ros.ros import make_bag
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.messages import stamp_ns
 from sepfm_ros.ros.process import parse_params, run_process
@@ -110,3 +112,22 @@ def test_without_camera_info_no_calibrated_topics(kitti, tmp_path):
     run_process(bag, out, parse_params(["use_camera_info:=false"]), progress=False)
     with BagReader(out) as reader:
         assert not set(TOPICS) & set(reader.topics)
+
+
+def test_per_frame_camera_info_recomputed_to_rounding_is_one_calibration(shared_data, tmp_path):
+    """KITTI's per-frame projection matrices (one camera_info per frame, as make_bag writes them)
+    differ by 1e-7 of the focal length: one calibration, so the check's window fills and says
+    OK rather than starting afresh at every pair."""
+    bag = tmp_path / "kitti"
+    args = ["--shared", "kitti_stereo", "--data", str(shared_data), "-o", str(bag), "--count", "8"]
+    assert make_bag.main(args) == 0
+    with BagReader(bag) as reader:
+        fx = {
+            deserialize_message(r.data, CameraInfo).p[0]
+            for r in reader.messages(["/left/camera_info"])
+        }
+    assert len(fx) > 1  # the per-frame calibrations are not bit-equal
+    done, total = run_process(bag, tmp_path / "out", parse_params([]), progress=False)
+    assert done == total == 8
+    _, checks = _outputs(tmp_path / "out")
+    assert checks[-1].level == b"\x00", checks[-1].message  # OK

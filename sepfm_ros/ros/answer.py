@@ -7,7 +7,8 @@ same answer for the same pair; nothing else composes outputs. A pair's answer
 - ``sepfm_msgs/TwoViewEstimate`` (``~/estimate``): F, status code and text, counts, line pair,
   timings and, with camera_info, the pose; for a pair that never reached the estimator a
   failure record (``STATUS_BAD_INPUT`` with the kind counted in ``/diagnostics``, e.g.
-  ``decode`` kinds or ``size_change``, or ``STATUS_INTERNAL_ERROR``) with zero counts;
+  ``decode`` kinds or ``size_change``, or ``STATUS_INTERNAL_ERROR``) with zero counts; matches
+  the estimator refused are ``STATUS_BAD_INPUT`` of kind ``estimator_input``, with their counts;
 - ``sepfm_msgs/MatchArray`` (``~/matches``): every match (none in a failure record);
 - with camera_info: the ``geometry_msgs/TransformStamped`` pose (``~/relative_transform``) when
   usable, and the calibration check's ``diagnostic_msgs/DiagnosticStatus``
@@ -53,6 +54,8 @@ from sepfm_ros.ros.messages import copy_header
 from sepfm_ros.ros.typed_msgs import fundamental_field
 
 SIZE_CHANGE = "size_change"  # bad-input kind: one camera's frame size changed within a pair
+# bad-input kind: the estimator refused the matches (e.g. a non-finite point after undistortion)
+ESTIMATOR_INPUT = "estimator_input"
 
 
 @dataclass(frozen=True)
@@ -340,6 +343,8 @@ def estimate_message(
         msg.f = fundamental_field(est.F)
     msg.status = int(est.code)
     msg.status_text = "ok" if result.ok else est.status
+    if est.code == StatusCode.BAD_INPUT:
+        msg.bad_input_kind = ESTIMATOR_INPUT
     msg.coordinates = coordinates
     msg.matches = len(result.matches)
     msg.inliers = est.num_inliers

@@ -480,6 +480,8 @@ class SepfmNode(Node):
             {"wait": item.wait_ms, "queue": queue_ms},
         )
         self._log_cameras(answer.cameras_update)
+        if answer.estimate.bad_input_kind:  # the estimator refused the matches
+            self._bad_input(answer.estimate.bad_input_kind, answer.estimate.status_text)
         if answer.calibration is not None:
             with self._lock:
                 self._calib_status = answer.calibration

@@ -51,6 +51,7 @@ from tqdm import tqdm
 from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.answer import (
+    ESTIMATOR_INPUT,
     AnswerSettings,
     BadInput,
     PairCalibration,
@@ -362,9 +363,11 @@ def expected_pairs(reader: BagReader, spec: InputSpec, params: dict[str, Any]) -
 
 
 def decoded(result: FrameResult) -> bool:
-    """The pair's images were decoded (its result is not a bad-input record)."""
-    return (
-        result.estimate is not None and result.estimate.status != TwoViewEstimate.STATUS_BAD_INPUT
+    """The pair's images were decoded (its result is not the record of images it could not use;
+    matches the estimator refused came from decoded images)."""
+    est = result.estimate
+    return est is not None and (
+        est.status != TwoViewEstimate.STATUS_BAD_INPUT or est.bad_input_kind == ESTIMATOR_INPUT
     )
 
 

@@ -14,12 +14,14 @@ from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.geometry import Estimate
 from sepfm_ros.geometry.estimate import StatusCode
 from sepfm_ros.pipeline.features import Matches
-from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig, PipelineResult
+from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig, PipelineResult
 from sepfm_ros.ros.answer import (
+    ESTIMATOR_INPUT,
     AnswerSettings,
     BadInput,
     DecodedPair,
     PairHeaders,
+    answer_matched,
     answer_pair,
     decode_pair,
     estimate_message,
@@ -185,3 +187,22 @@ def test_an_error_while_answering_gives_the_internal_error_record():
     assert answer.estimate.status_text.startswith("internal error: error: OpenCV")
     assert answer.error is not None and answer.result is None
     assert answer.matches.matches == [] and not answer.estimate.has_f
+
+
+def test_matches_the_estimator_refuses_are_bad_input_of_their_own_kind():
+    """A non-finite matched point (what a wild distortion model can make of a pixel) reaches
+    the estimator, which refuses it: STATUS_BAD_INPUT with kind estimator_input (the kind the
+    node counts in /diagnostics), the reason, and the matches it was given."""
+    rng = np.random.default_rng(3)
+    pts_a = rng.uniform(0, 600, (40, 2))
+    pts_b = pts_a + 1.0
+    pts_a[3, 0] = np.nan
+    config = PipelineConfig()
+    matched = MatchedPair(
+        Matches(pts_a, pts_b, np.ones(40)), (640, 480), (640, 480), {}, config, 0.0
+    )
+    answer = answer_matched(Pipeline(config), HEADERS, matched, AnswerSettings.of(config, True))
+    msg = answer.estimate
+    assert msg.status == TwoViewEstimate.STATUS_BAD_INPUT and msg.bad_input_kind == ESTIMATOR_INPUT
+    assert "NaN or inf" in msg.status_text and not msg.has_f
+    assert msg.matches == 40 and len(answer.matches.matches) == 40

@@ -7,19 +7,17 @@ then the node on a single-threaded executor until SIGINT or SIGTERM.
 
 from __future__ import annotations
 
-import argparse
 import os
 import threading
 
 import cv2
-import rclpy
-from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from threadpoolctl import threadpool_limits
 
 from sepfm_ros.pipeline.compiled import warm_up
 from sepfm_ros.ros.dds import configure_dds
 from sepfm_ros.ros.memory import configure_malloc
 from sepfm_ros.ros.node import SepfmNode
+from sepfm_ros.ros.node_process import parse_command_line, run_node
 from sepfm_ros.ros.parameters import parameters_help
 from sepfm_ros.ros.signals import install_stop_handlers, restore_handlers
 
@@ -73,36 +71,15 @@ def warm_up_interruptibly() -> float | None:
     return done.get("s", 0.0)
 
 
-def spin_until_shutdown(executor: Executor) -> None:
-    """``executor.spin()`` until SIGINT or SIGTERM shuts its context down.
-
-    rclpy's signal handler shuts the context down from another point in the program: when that
-    happens after spin checked the context and before it built its wait set, building the wait
-    set fails on the shut context (``RCLError``). An error raised once the context is shut is
-    that shutdown and ends the spin quietly; one raised while the context is still up is
-    re-raised.
-    """
-    try:
-        executor.spin()
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    except Exception:
-        if executor.context.ok():
-            raise
-
-
 def main(argv: list[str]) -> int:
     """Run the node until SIGINT/SIGTERM; returns the process exit code."""
-    from rclpy.utilities import remove_ros_args
-
-    own = remove_ros_args(["sepfm", *argv])[1:]
-    parser = argparse.ArgumentParser(
-        prog="sepfm_ros node",
-        usage="%(prog)s [--ros-args -p NAME:=VALUE ... --params-file FILE -r FROM:=TO ...]",
-        description=_usage(),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    parse_command_line(
+        "sepfm_ros node",
+        "sepfm",
+        argv,
+        "%(prog)s [--ros-args -p NAME:=VALUE ... --params-file FILE -r FROM:=TO ...]",
+        _usage(),
     )
-    parser.parse_args(own)
     # before any image flows and before rclpy creates the DDS participant (see ros/memory.py)
     malloc_fixed = configure_malloc()
     dds = configure_dds()
@@ -112,26 +89,15 @@ def main(argv: list[str]) -> int:
     if warm_s is None:
         print("sepfm_ros node: interrupted while preparing the estimator", flush=True)
         os._exit(0)  # the compiling thread cannot be joined; nothing is open yet
-    rclpy.init(args=["sepfm", *argv])
-    node = None
-    try:
-        try:
-            node = SepfmNode(dds=dds)
-        except ValueError as err:
-            print(f"sepfm_ros node: {err}", flush=True)
-            return 2
+
+    def make_node() -> SepfmNode:
+        node = SepfmNode(dds=dds)
         node.get_logger().info(f"estimator kernels ready in {warm_s:.1f} s")
         node.get_logger().info(
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
             + ("DDS subscriptions with DYNAMIC history" if dds.profiles else "DDS config left")
             + f"; image input over {dds.describe()}"
         )
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        spin_until_shutdown(executor)
-    finally:
-        if node is not None:
-            node.shutdown()
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+        return node
+
+    return run_node("sepfm_ros node", "sepfm", argv, make_node, SepfmNode.shutdown)

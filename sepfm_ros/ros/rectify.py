@@ -32,16 +32,13 @@ are counted as ``waiting``.
 
 from __future__ import annotations
 
-import argparse
 import threading
 from collections import Counter, OrderedDict
 from dataclasses import replace
 from typing import Any
 
 import numpy as np
-import rclpy
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
@@ -65,7 +62,7 @@ from sepfm_ros.ros.image_conversion import (
 )
 from sepfm_ros.ros.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.messages import copy_header, diagnostic_array, health_status, stamp_ns
-from sepfm_ros.ros.node_main import spin_until_shutdown
+from sepfm_ros.ros.node_process import parse_command_line, run_node
 from sepfm_ros.ros.parameters import (
     PARAMS as NODE_PARAMS,
 )
@@ -347,30 +344,8 @@ def _usage() -> str:
 
 def main(argv: list[str]) -> int:
     """Run the rectifier until SIGINT/SIGTERM; returns the process exit code."""
-    from rclpy.utilities import remove_ros_args
-
-    own = remove_ros_args([NODE_NAME, *argv])[1:]
-    parser = argparse.ArgumentParser(
-        prog="sepfm_ros rectify",
-        usage="%(prog)s [--ros-args -p NAME:=VALUE ... -r FROM:=TO ...]",
-        description=_usage(),
-        formatter_class=argparse.RawDescriptionHelpFormatter,
-    )
-    parser.parse_args(own)
+    prog = "sepfm_ros rectify"
+    usage = "%(prog)s [--ros-args -p NAME:=VALUE ... -r FROM:=TO ...]"
+    parse_command_line(prog, NODE_NAME, argv, usage, _usage())
     dds = configure_dds()
-    rclpy.init(args=[NODE_NAME, *argv])
-    node = None
-    try:
-        try:
-            node = RectifyNode(dds=dds)
-        except ValueError as err:
-            print(f"sepfm_ros rectify: {err}", flush=True)
-            return 2
-        executor = SingleThreadedExecutor()
-        executor.add_node(node)
-        spin_until_shutdown(executor)
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
-    return 0
+    return run_node(prog, NODE_NAME, argv, lambda: RectifyNode(dds=dds))

@@ -13,7 +13,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from shell_jobs import as_background_job
 
-from sepfm_ros.ros.node_main import spin_until_shutdown
+from sepfm_ros.ros.node_process import spin_until_shutdown
 
 
 @pytest.mark.parametrize(
@@ -108,3 +108,32 @@ def test_spin_reraises_errors_while_the_context_is_up():
             spin_until_shutdown(_FailsWhileUp(context=context))
     finally:
         context.try_shutdown()
+
+
+@pytest.mark.parametrize("command", ["node", "rectify"])
+def test_a_node_refuses_a_bad_parameter_or_a_non_ros_argument_with_exit_2(command, ros_domain_id):
+    """Out of range: the parameter's error, exit 2, no traceback; an argument that is not a ROS
+    argument: the usage, exit 2 (before rclpy starts)."""
+    run = [sys.executable, "-m", "sepfm_ros", command]
+    range_, type_ = {
+        "node": ("threshold_px:=-1.0", "threshold_px:=wide"),
+        "rectify": ("min_inliers:=3", "min_inliers:=many"),
+    }[command]
+    for bad in (range_, type_, "transport:=carrier_pigeon"):
+        r = subprocess.run(
+            [*run, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=600
+        )
+        out = r.stdout + r.stderr
+        assert r.returncode == 2, out
+        assert f"sepfm_ros {command}: invalid parameters" in out, out
+        assert bad.split(":=")[0] in out and "Traceback" not in out, out
+    # remaps to what is not a topic name (rcl refuses them as it parses the arguments)
+    for rule in ("bad topic", "9bad"):
+        remap = [*run, "--ros-args", "-r", f"left/image_raw:={rule}"]
+        r = subprocess.run(remap, capture_output=True, text=True, timeout=600)
+        out = r.stdout + r.stderr
+        assert r.returncode == 2 and f"sepfm_ros {command}: invalid ROS arguments" in out, out
+        assert "Traceback" not in out, out
+    r = subprocess.run([*run, "--frobnicate"], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 2 and f"usage: sepfm_ros {command}" in r.stderr, r.stderr
+    assert "--frobnicate" in r.stderr

@@ -17,21 +17,27 @@ from rclpy.node import Node
 N = TypeVar("N", bound=Node)
 
 
+def own_arguments(prog: str, node_name: str, argv: list[str]) -> list[str]:
+    """``argv`` without its ROS arguments (``--ros-args ...``); ROS arguments rcl cannot parse
+    (a remap to a name with a space, ...) exit 2 with rcl's reason after ``prog``."""
+    from rclpy.impl.implementation_singleton import rclpy_implementation
+    from rclpy.utilities import remove_ros_args
+
+    try:
+        return list(remove_ros_args([node_name, *argv])[1:])
+    except rclpy_implementation.RCLInvalidROSArgsError as err:
+        reason = str(err).split(", at ")[0]  # rcl appends its source locations
+        print(f"{prog}: invalid ROS arguments: {reason}", file=sys.stderr, flush=True)
+        raise SystemExit(2) from None
+
+
 def parse_command_line(
     prog: str, node_name: str, argv: list[str], usage: str, help_text: str
 ) -> None:
     """Refuse ROS arguments rcl cannot parse (a remap rule with a space, ...) and any argument
     that is not a ROS argument (exit 2, with the reason or ``prog``'s usage); ``--help`` prints
     ``help_text`` and exits."""
-    from rclpy.impl.implementation_singleton import rclpy_implementation
-    from rclpy.utilities import remove_ros_args
-
-    try:
-        own = remove_ros_args([node_name, *argv])[1:]
-    except rclpy_implementation.RCLInvalidROSArgsError as err:
-        reason = str(err).split(", at ")[0]  # rcl appends its source locations
-        print(f"{prog}: invalid ROS arguments: {reason}", file=sys.stderr, flush=True)
-        raise SystemExit(2) from None
+    own = own_arguments(prog, node_name, argv)
     parser = argparse.ArgumentParser(
         prog=prog,
         usage=usage,

@@ -166,9 +166,10 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str]) -> int:
     import rclpy
     from rclpy.executors import ExternalShutdownException, SingleThreadedExecutor
-    from rclpy.utilities import remove_ros_args
 
-    args = _parse(remove_ros_args(["record", *argv])[1:])
+    from sepfm_ros.ros.node_process import own_arguments
+
+    args = _parse(own_arguments("sepfm_ros record", "record", argv))
     try:
         check_output_path(args.output)
         if args.flush_interval <= 0:

@@ -456,11 +456,14 @@ def _parse(argv: list[str]) -> argparse.Namespace:
 def main(argv: list[str]) -> int:
     import rclpy
 
+    from sepfm_ros.ros.node_process import own_arguments
+
     # Own arguments come before --ros-args: rcl's remove_ros_args would also take our
     # "--remap FROM:=TO" values for (deprecated-syntax) ROS remap rules.
     split = argv.index("--ros-args") if "--ros-args" in argv else len(argv)
     args = _parse(argv[:split])
     ros_argv = argv[split:]
+    own_arguments("sepfm_ros replay", "replay", ros_argv)  # exits 2 when rcl cannot parse them
     try:
         remap = parse_remaps(args.remap)
         with BagReader(args.bag) as reader:  # fail fast on a bad bag, before DDS starts

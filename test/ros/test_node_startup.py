@@ -137,3 +137,17 @@ def test_a_node_refuses_a_bad_parameter_or_a_non_ros_argument_with_exit_2(comman
     r = subprocess.run([*run, "--frobnicate"], capture_output=True, text=True, timeout=600)
     assert r.returncode == 2 and f"usage: sepfm_ros {command}" in r.stderr, r.stderr
     assert "--frobnicate" in r.stderr
+
+
+@pytest.mark.parametrize("command", ["record", "replay"])
+def test_record_and_replay_refuse_ros_arguments_rcl_cannot_parse(command, tmp_path):
+    out = tmp_path / "out"
+    own = {"record": ["/chatter", "-o", str(out)], "replay": [str(tmp_path / "bag")]}[command]
+    r = subprocess.run(
+        [sys.executable, "-m", "sepfm_ros", command, *own, "--ros-args", "-r", "a:=b c"],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 2 and f"sepfm_ros {command}: invalid ROS arguments" in r.stderr
+    assert "Traceback" not in r.stderr and not out.exists(), r.stderr

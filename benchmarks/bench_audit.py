@@ -207,10 +207,11 @@ def main(argv: list[str] | None = None) -> int:
                     flush=True,
                 )
             print(
-                f"\nOn {os.cpu_count()} cores shared with other work these rows measure the "
-                "engine's overhead against the plain loop, not scaling: a cluster of N such "
-                "workers divides the sequential loop's seconds per bag by about N (each bag, or "
-                "each 60 s slice of a long bag, is one task)."
+                f"\nOn {os.cpu_count()} cores, which the workers share with the driver (and the "
+                "cluster's scheduler), these rows measure the engine's overhead against the plain "
+                "loop more than its scaling: a cluster of N machines like this one divides the "
+                "sequential loop's seconds per bag by about N (each bag, or each 60 s slice of a "
+                "long bag, is one task)."
             )
     finally:
         shutil.rmtree(work, ignore_errors=True)

@@ -1,7 +1,6 @@
 """The warm-up a node runs at start (:func:`sepfm_ros.pipeline.compiled.warm_up`) leaves no
-kernel to compile (or load) on a stream's pairs: compiling one mid-stream stalls that pair for seconds on a
-fresh install and keeps tens of MB of compiler memory in the node (the live fuzz test measured
-+48 MB on its first valid pairs)."""
+kernel to compile (or load) on a stream's pairs: a kernel compiled mid-stream stalls that pair
+for seconds on a fresh install and keeps tens of MB of compiler memory in the node."""
 
 from __future__ import annotations
 

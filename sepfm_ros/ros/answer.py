@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import math
 import time
-import traceback
 from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 from typing import Any
@@ -272,16 +271,6 @@ def internal_error_answer(
     msg.status = int(StatusCode.INTERNAL_ERROR)
     msg.status_text = f"internal error: {type(err).__name__}: {err}"
     return PairAnswer(msg, _empty_matches(headers), error=err)
-
-
-def internal_error_kind(err: BaseException) -> str:
-    """The kind under which an internal error is counted in ``/diagnostics``."""
-    return f"internal_{type(err).__name__}"
-
-
-def internal_error_text(err: BaseException) -> str:
-    """An internal error with its traceback, for the log."""
-    return "".join(traceback.format_exception(err))
 
 
 def add_timings(msg: TwoViewEstimate, timings_ms: Mapping[str, float]) -> None:

@@ -2,6 +2,8 @@
 
 - :class:`ThrottledLog`: a recurring problem is logged at most once per period per kind, with the
   count held back since the last line (the counts themselves go to ``/diagnostics``).
+- :func:`internal_error_kind` and :func:`internal_error_text`: how an unexpected exception is
+  counted and logged (by the callbacks below and by the sepfm node's worker threads).
 - :func:`guarded`: an exception in an executor callback is counted as an internal error and
   logged through the node's :meth:`KeepsServing.internal_error`, never raised into the executor.
 
@@ -15,14 +17,25 @@ import threading
 import time
 import traceback
 from collections.abc import Callable
-from typing import Any, Protocol, TypeVar
-
-from rclpy.node import Node
+from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from sepfm_ros.stream.health import LogThrottle
 
+if TYPE_CHECKING:
+    from rclpy.node import Node
+
 # A recurring problem of one kind is logged at most once per this many seconds.
 LOG_THROTTLE_S = 10.0
+
+
+def internal_error_kind(err: BaseException) -> str:
+    """The kind under which an internal error is counted in ``/diagnostics``."""
+    return f"internal_{type(err).__name__}"
+
+
+def internal_error_text(err: BaseException) -> str:
+    """An internal error with its traceback, for the log."""
+    return "".join(traceback.format_exception(err))
 
 
 class ThrottledLog:
@@ -68,7 +81,7 @@ def guarded(callback: Callable[..., None]) -> Callable[..., None]:
         try:
             callback(self, *args)
         except Exception as err:  # noqa: BLE001 - a long-running node keeps serving
-            text = f"{callback.__name__}: " + "".join(traceback.format_exception(err))
-            self.internal_error(f"internal_{type(err).__name__}", text)
+            text = f"{callback.__name__}: " + internal_error_text(err)
+            self.internal_error(internal_error_kind(err), text)
 
     return run

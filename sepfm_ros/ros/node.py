@@ -54,15 +54,18 @@ from sepfm_ros.ros.answer import (
     decode_pair,
     failure_answer,
     internal_error_answer,
-    internal_error_kind,
-    internal_error_text,
     precheck,
 )
 from sepfm_ros.ros.calibrated import CalibratedStream, CamerasUpdate
 from sepfm_ros.ros.camera_info import CameraInfoInputs
 from sepfm_ros.ros.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.image_conversion import ZeroStepNotes
-from sepfm_ros.ros.keep_serving import ThrottledLog, guarded
+from sepfm_ros.ros.keep_serving import (
+    ThrottledLog,
+    guarded,
+    internal_error_kind,
+    internal_error_text,
+)
 from sepfm_ros.ros.memory import (
     release_free_memory,
 )
@@ -378,7 +381,7 @@ class SepfmNode(Node):
             try:
                 matched = self._match(job)
             except Exception as err:  # keep serving; count, log and answer
-                matched = self._failed(job, self._internal_error(job, err))
+                matched = self._failed(job, self._internal_error_answer(job, err))
             if isinstance(matched, BadInput):
                 self._bad_input(matched.kind, matched.text)
                 answer = failure_answer(job.headers(), matched, self._settings())
@@ -399,10 +402,10 @@ class SepfmNode(Node):
                 else:
                     self._estimate_and_publish(matched)
             except Exception as err:  # keep serving; count, log and answer
-                self._publish_answer(self._internal_error(matched.job, err))
+                self._publish_answer(self._internal_error_answer(matched.job, err))
             self._scheduler.estimate_done(t0)
 
-    def _internal_error(self, job: Job, err: Exception) -> PairAnswer:
+    def _internal_error_answer(self, job: Job, err: Exception) -> PairAnswer:
         """Count and log an unexpected error of a pair; its answer (STATUS_INTERNAL_ERROR)."""
         self._bad_input(internal_error_kind(err), internal_error_text(err))
         return internal_error_answer(job.headers(), err, self._settings())

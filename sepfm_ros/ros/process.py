@@ -58,7 +58,6 @@ from sepfm_ros.ros.answer import (
     PairHeaders,
     answer_pair,
     decode_pair,
-    internal_error_text,
     precheck,
 )
 from sepfm_ros.ros.bags.errors import BagCorruptError, BagError
@@ -83,6 +82,7 @@ from sepfm_ros.ros.bags.types import (
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.calibrated import CalibratedStream
 from sepfm_ros.ros.image_conversion import ZeroStepNotes
+from sepfm_ros.ros.keep_serving import internal_error_text
 from sepfm_ros.ros.messages import copy_header, stamp_ns
 from sepfm_ros.ros.parameters import PARAMS, monitor_config, parameter_error, pipeline_config
 from sepfm_ros.ros.results import (

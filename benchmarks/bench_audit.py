@@ -2,8 +2,8 @@
 
     python benchmarks/bench_audit.py [--rigs 4] [--bags-per-rig 2] [--frames 30] [--write-docs]
 
-The fleet is ``sepfm_ros.ros.make_fleet``'s (KITTI stereo 1241x376 with camera_info at 10 Hz,
-half the rigs pitching by 0.5 degrees part way). The same bags are audited by:
+The fleet is ``sepfm_ros.ros.bags.synthetic_fleet``'s (KITTI stereo 1241x376 with camera_info at
+10 Hz, half the rigs pitching by 0.5 degrees part way). The same bags are audited by:
 
 - ``sequential loop``: this process calls the audit's two tasks (inspect the bag, answer its
   pairs) bag after bag, no engine: the work itself;
@@ -47,8 +47,8 @@ def _warm(client: Any) -> None:
 
 def _options(slice_s: float) -> Any:
     from sepfm_ros.fleet.records import InputChoice, Thresholds
-    from sepfm_ros.ros.audit import Options
-    from sepfm_ros.ros.process import parse_params
+    from sepfm_ros.ros.offline.audit import Options
+    from sepfm_ros.ros.session.parameters import parse_params
 
     return Options(parse_params([]), InputChoice(), slice_s, Thresholds(), None, False)
 
@@ -56,7 +56,7 @@ def _options(slice_s: float) -> Any:
 def run_engine(bags: list[Path], out: Path, connect: Callable[[], Any]) -> dict[str, float]:
     """Start the engine (``connect``), warm its workers, then audit ``bags`` into ``out``."""
     from sepfm_ros.fleet.ledger import Ledger
-    from sepfm_ros.ros.audit import Driver, bag_keys
+    from sepfm_ros.ros.offline.audit import Driver, bag_keys
 
     opts = _options(60.0)
     t0 = time.perf_counter()
@@ -77,7 +77,7 @@ def run_sequential(bags: list[Path]) -> dict[str, float]:
     from sepfm_ros.fleet.records import SliceTask, TaskFailure
     from sepfm_ros.fleet.slices import overlap_ns, plan_slices
     from sepfm_ros.pipeline.compiled import warm_up
-    from sepfm_ros.ros.audit_adapter import audit_slice, inspect_bag
+    from sepfm_ros.ros.offline.audit_slices import audit_slice, inspect_bag
 
     opts = _options(60.0)
     warm_up()
@@ -164,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--write-docs", action="store_true")
     a = ap.parse_args(argv)
     from sepfm_ros.fleet.engine import engine
-    from sepfm_ros.ros.make_fleet import RigPlan, make_fleet
+    from sepfm_ros.ros.bags.synthetic_fleet import RigPlan, make_fleet
 
     work = Path(tempfile.mkdtemp(prefix="bench_audit_"))
     try:

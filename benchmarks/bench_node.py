@@ -140,7 +140,7 @@ def thread_line(before: dict[str, float], after: dict[str, float], pairs: int) -
 
 def node_values(args) -> dict:
     """The node's parameter values for this run: its defaults with the command-line changes."""
-    from sepfm_ros.ros.parameters import PARAMS
+    from sepfm_ros.ros.session.parameters import PARAMS
 
     values = {name: spec.default for name, spec in PARAMS.items()}
     values.update(features=args.features, max_features=args.max_features, method=args.method)
@@ -162,8 +162,8 @@ def pipeline_steps(mode: str, images: list) -> list[tuple]:
 def bench_pipeline(mode, images, args) -> None:
     from sepfm_ros.pipeline.compiled import warm_up
     from sepfm_ros.pipeline.pipeline import Pipeline
-    from sepfm_ros.ros.node_main import limit_thread_pools
-    from sepfm_ros.ros.parameters import pipeline_config
+    from sepfm_ros.ros.node.spin import limit_thread_pools
+    from sepfm_ros.ros.session.parameters import pipeline_config
 
     limit_thread_pools(1)  # as in the node
     warm_up()  # as the node does before its first frame: compiling is not timed
@@ -333,7 +333,7 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s, threads=None):
 
 
 def bench_node(mode, images, args, publisher_qos: str) -> None:
-    from sepfm_ros.ros.image_conversion import numpy_to_image
+    from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
 
     node_name = "sepfm_bench_node"
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", "-r", f"__node:={node_name}"]

@@ -116,7 +116,7 @@ def node_command(rig: str) -> list[str]:
 
 
 def _pairs() -> list[tuple]:
-    from sepfm_ros.ros.image_conversion import numpy_to_image
+    from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
 
     out = []
     for k in range(10):

@@ -22,7 +22,7 @@ import shutil
 import sys
 from pathlib import Path
 
-from sepfm_ros.ros.make_bag import make_bag, synthetic_frames
+from sepfm_ros.ros.bags.synthesis import make_bag, synthetic_frames
 
 RATE_HZ = 2.0
 BAGS = Path(__file__).resolve().parent.parent / "bags"

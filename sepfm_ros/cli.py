@@ -15,15 +15,31 @@ from collections.abc import Callable, Sequence
 # a process exit code.
 SUBCOMMANDS: dict[str, tuple[str, str, str]] = {
     "demo": ("sepfm_ros.demo", "main", "run the main job on data the package ships or makes"),
-    "node": ("sepfm_ros.ros.node_main", "main", "the live two-view geometry node"),
-    "make_bag": ("sepfm_ros.ros.make_bag", "main", "build a bag from images or shared data"),
-    "replay": ("sepfm_ros.ros.replay", "main", "publish a bag into live topics"),
-    "record": ("sepfm_ros.ros.record", "main", "record topics into a bag"),
-    "process": ("sepfm_ros.ros.process", "main", "run the pipeline over a bag offline"),
+    "node": ("sepfm_ros.ros.commands.node", "main", "the live two-view geometry node"),
+    "make_bag": (
+        "sepfm_ros.ros.commands.make_bag",
+        "main",
+        "build a bag from images or shared data",
+    ),
+    "replay": ("sepfm_ros.ros.commands.replay", "main", "publish a bag into live topics"),
+    "record": ("sepfm_ros.ros.commands.record", "main", "record topics into a bag"),
+    "process": ("sepfm_ros.ros.commands.process", "main", "run the pipeline over a bag offline"),
     "eval": ("sepfm_ros.evaluation.cli", "main", "evaluate estimators on pairs with ground truth"),
-    "calibration_check": ("sepfm_ros.ros.calibration_check", "main", "check a stereo calibration"),
-    "rectify": ("sepfm_ros.ros.rectify", "main", "rectified stereo images without camera_info"),
-    "audit": ("sepfm_ros.ros.audit", "main", "audit many rigs' calibration over many bags"),
+    "calibration_check": (
+        "sepfm_ros.ros.commands.calibration_check",
+        "main",
+        "check a stereo calibration",
+    ),
+    "rectify": (
+        "sepfm_ros.ros.commands.rectify",
+        "main",
+        "rectified stereo images without camera_info",
+    ),
+    "audit": (
+        "sepfm_ros.ros.commands.audit",
+        "main",
+        "audit many rigs' calibration over many bags",
+    ),
     "warm_up": (
         "sepfm_ros.warm_up",
         "main",

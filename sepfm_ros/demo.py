@@ -37,7 +37,7 @@ from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import check_output_path
 
 if TYPE_CHECKING:
-    from sepfm_ros.ros.replay import Replayer
+    from sepfm_ros.ros.node.replayer import Replayer
 
 PACKAGE_DIR = Path(__file__).resolve().parent
 DEFAULT_BAG = "synthetic_stereo"
@@ -109,12 +109,13 @@ def replay_through_node(
     from diagnostic_msgs.msg import DiagnosticArray
     from rclpy.executors import SingleThreadedExecutor
 
-    from sepfm_ros.ros.bags.inputs import camera_info_topics
+    from sepfm_ros.ros.bags.inputs import camera_info_topics, detect_inputs
+    from sepfm_ros.ros.bags.pairing import iter_pairs
+    from sepfm_ros.ros.bags.results import calibrated_topics, output_topics
     from sepfm_ros.ros.bags.writer import BagWriter
-    from sepfm_ros.ros.process import detect_inputs, iter_pairs, parse_params
-    from sepfm_ros.ros.record import Recorder
-    from sepfm_ros.ros.replay import Replayer
-    from sepfm_ros.ros.results import calibrated_topics, output_topics
+    from sepfm_ros.ros.node.recorder import Recorder
+    from sepfm_ros.ros.node.replayer import Replayer
+    from sepfm_ros.ros.session.parameters import parse_params
 
     params = list(params or [])
     check_output_path(out)
@@ -277,8 +278,8 @@ def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
     from rclpy.serialization import deserialize_message
     from sensor_msgs.msg import Image
 
-    from sepfm_ros.ros.image_conversion import message_to_numpy
-    from sepfm_ros.ros.messages import stamp_ns as to_ns
+    from sepfm_ros.ros.msgs.headers import stamp_ns as to_ns
+    from sepfm_ros.ros.msgs.image_conversion import message_to_numpy
 
     best = None
     with BagReader(live_bag) as reader:
@@ -302,7 +303,7 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
 
     from sepfm_msgs.msg import TwoViewEstimate
     from sepfm_ros.geometry.calibrated.calibration_check import LEVEL_NAMES
-    from sepfm_ros.ros.results import calibrated_topics
+    from sepfm_ros.ros.bags.results import calibrated_topics
 
     poses = [
         r.estimate
@@ -374,7 +375,7 @@ def main(argv: list[str]) -> int:
             progress=not args.quiet,
             log_path=out / "node.log",
         )
-        from sepfm_ros.ros.results import format_summary, format_table, read_results, summarize
+        from sepfm_ros.ros.bags.results import format_summary, format_table, read_results, summarize
 
         results = read_results(run.output, gt_bag=bag)
     except BagError as err:

@@ -29,9 +29,10 @@ from sensor_msgs.msg import Image
 from std_msgs.msg import Header
 
 from sepfm_msgs.msg import MatchArray, TwoViewEstimate
-from sepfm_ros.ros.messages import stamp_ns, status_values
-from sepfm_ros.ros.results import match_table
-from sepfm_ros.ros.typed_msgs import fundamental_from_msg
+from sepfm_ros.ros.bags.results import match_table
+from sepfm_ros.ros.msgs.diagnostics import status_values
+from sepfm_ros.ros.msgs.fundamental import fundamental_from_msg
+from sepfm_ros.ros.msgs.headers import stamp_ns
 
 REPO = Path(__file__).resolve().parent.parent
 RELIABLE = QoSProfile(depth=20, reliability=ReliabilityPolicy.RELIABLE)
@@ -194,7 +195,7 @@ class Client:
 
     def wait_outputs(self, stamp: int, need_f: bool = True, timeout: float = ANSWER_TIMEOUT):
         """(TwoViewEstimate, F (3, 3) or None, match table) for the output stamp; the match
-        table is :func:`~sepfm_ros.ros.results.match_table` of ~/matches. ``need_f``: an
+        table is :func:`~sepfm_ros.ros.bags.results.match_table` of ~/matches. ``need_f``: an
         answer without F fails the test with its status."""
         estimate = self.wait_info(stamp, timeout)
         if need_f and not estimate.has_f:

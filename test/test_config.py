@@ -8,7 +8,7 @@ from pathlib import Path
 
 from ruamel.yaml import YAML
 
-from sepfm_ros.ros.parameters import PARAMS
+from sepfm_ros.ros.session.parameters import PARAMS
 
 CONFIG = Path(__file__).resolve().parent.parent / "config" / "sepfm.yaml"
 

@@ -20,7 +20,7 @@ from geometry_msgs.msg import Quaternion, Transform, Vector3
 from std_msgs.msg import Header
 
 from sepfm_msgs.msg import Match, MatchArray, StageTiming, TwoViewEstimate
-from sepfm_ros.ros.typed_msgs import fundamental_field
+from sepfm_ros.ros.msgs.fundamental import fundamental_field
 
 # F with distinct entries and F != F^T, so a transposed or scrambled copy cannot pass
 SAMPLE_F = np.array(

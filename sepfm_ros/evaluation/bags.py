@@ -1,11 +1,12 @@
 """Pairs with ground truth from bags, for ``sepfm_ros eval --bags``.
 
-Two kinds of bag are read (see :mod:`sepfm_ros.ros.make_bag` and :mod:`sepfm_ros.ros.process`):
+Two kinds of bag are read (see :mod:`sepfm_ros.ros.bags.synthesis` and
+:mod:`sepfm_ros.ros.offline.process`):
 
 - an *input bag* with image topics (the ``--left``/``--right`` or ``--image`` topics when given,
   else picked from the bag as ``process`` does, see :mod:`sepfm_ros.ros.bags.inputs`) and
   ``/ground_truth/fundamental``: the pairs are the ones ``process`` forms
-  (:func:`sepfm_ros.ros.process.iter_pairs`, default node parameters), each
+  (:func:`sepfm_ros.ros.bags.pairing.iter_pairs`, default node parameters), each
   scored against the GT F with the pair's stamp. The decoded frames are written as PNG files into
   a folder (under the matches cache), so matches are cached by image content like manifest pairs.
 - a bag written by ``process`` (``/sepfm/...`` outputs plus the copied ground truth): the pairs are
@@ -27,18 +28,19 @@ import numpy as np
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec, parse_fundamental
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
+from sepfm_ros.ros.bags.pairing import iter_pairs, pairing_slop_ns, validate_inputs
 from sepfm_ros.ros.bags.reader import BAG_SUFFIXES, BagReader
-from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
-from sepfm_ros.ros.image_conversion import ImageDecodeError, pair_to_numpy
-from sepfm_ros.ros.messages import stamp_ns
-from sepfm_ros.ros.process import iter_pairs, pairing_slop_ns, parse_params, validate_inputs
-from sepfm_ros.ros.results import (
+from sepfm_ros.ros.bags.results import (
     OUTPUT_NAMESPACE,
     output_topics,
     read_ground_truth,
     read_results,
     run_label,
 )
+from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
+from sepfm_ros.ros.msgs.headers import stamp_ns
+from sepfm_ros.ros.msgs.image_conversion import ImageDecodeError, pair_to_numpy
+from sepfm_ros.ros.session.parameters import parse_params
 
 
 def is_bag(path: Path) -> bool:

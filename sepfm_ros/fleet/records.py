@@ -84,7 +84,7 @@ class CameraIdentity:
 
 @dataclass(frozen=True)
 class BagInfo:
-    """A bag as the audit plans it (:func:`sepfm_ros.ros.audit_adapter.inspect_bag`).
+    """A bag as the audit plans it (:func:`sepfm_ros.ros.offline.audit_slices.inspect_bag`).
 
     Attributes:
         bag: the bag's path (as the workers see it).

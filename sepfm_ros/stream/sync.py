@@ -14,7 +14,7 @@ message_filters is not available from PyPI, so this is the stereo node's pairing
   most once, and memory is bounded by ``2 x queue_size`` messages.
 
 Stamps are integer nanoseconds (``sec * 10**9 + nanosec``, converted by the ROS adapters:
-:func:`sepfm_ros.ros.messages.stamp_ns`) to keep comparisons exact.
+:func:`sepfm_ros.ros.msgs.headers.stamp_ns`) to keep comparisons exact.
 """
 
 from __future__ import annotations

@@ -11,7 +11,7 @@ import pytest
 
 from sepfm_ros.evaluation import cli
 from sepfm_ros.evaluation.bags import find_bags, load_bag_pairs
-from sepfm_ros.ros import make_bag, process
+from sepfm_ros.ros.commands import make_bag, process
 
 pytestmark = pytest.mark.slow  # bags end to end through process and eval, about 50 s
 

@@ -1,9 +1,9 @@
 """``sepfm_ros audit`` on a fleet of our own calibrated stereo bags, on real Dask clusters.
 
-The fleet (``sepfm_ros.ros.make_fleet``): four rigs recording KITTI stereo with camera_info, two
-bags each on two days; robot_b pitches by 0.5 degrees from frame 8 of its second bag, robot_d
-from frame 12 of its first. Beside them a ROS 1 bag of a fifth rig, the package's motion bag (no
-calibration: answer statistics only) and a truncated bag.
+The fleet (``sepfm_ros.ros.bags.synthetic_fleet``): four rigs recording KITTI stereo with
+camera_info, two bags each on two days; robot_b pitches by 0.5 degrees from frame 8 of its second
+bag, robot_d from frame 12 of its first. Beside them a ROS 1 bag of a fifth rig, the package's
+motion bag (no calibration: answer statistics only) and a truncated bag.
 """
 
 from __future__ import annotations
@@ -21,8 +21,8 @@ import cv2
 import pytest
 from robot_bags import write_robot_bag
 
-from sepfm_ros.ros.make_bag import camera_infos, shared_frames
-from sepfm_ros.ros.make_fleet import RigPlan, make_fleet
+from sepfm_ros.ros.bags.synthesis import camera_infos, shared_frames
+from sepfm_ros.ros.bags.synthetic_fleet import RigPlan, make_fleet
 
 pytestmark = pytest.mark.slow
 distributed = pytest.importorskip("distributed", reason="the fleet extra: pip install distributed")

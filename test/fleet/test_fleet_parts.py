@@ -14,7 +14,7 @@ from sepfm_ros.fleet.ledger import BAGS_CSV, PAIRS_CSV, DuplicateRowError, Ledge
 from sepfm_ros.fleet.records import BagRow, PairRecord, drift_start
 from sepfm_ros.fleet.rigs import RigPatternError, compile_pattern, naming_conflicts, rig_name
 from sepfm_ros.fleet.slices import overlap_ns, plan_slices
-from sepfm_ros.ros.parameters import PARAMS
+from sepfm_ros.ros.session.parameters import PARAMS
 
 
 def _rosbag2(folder):
@@ -116,7 +116,7 @@ def _stream_no_ros():
 
 def test_every_fleet_module_imports_without_ros():
     """The fleet's parts run on any Python (the driver's machine needs no ROS to plan or
-    report); the bag side is sepfm_ros.ros.audit_adapter."""
+    report); the bag side is sepfm_ros.ros.offline.audit_slices."""
     r = _stream_no_ros().import_without_ros("sepfm_ros.fleet")
     assert r.returncode == 0, r.stdout + r.stderr
     imported = set(r.stdout.split())

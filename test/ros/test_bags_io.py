@@ -25,10 +25,10 @@ from std_msgs.msg import Header, String
 from sepfm_ros.demo import bundled_bags_dir
 from sepfm_ros.ros.bags.errors import BagCorruptError, BagNotFoundError, OutputExistsError
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
+from sepfm_ros.ros.bags.results import read_results
 from sepfm_ros.ros.bags.types import header_stamp_ns
 from sepfm_ros.ros.bags.writer import BagWriter, write_bag
-from sepfm_ros.ros.image_conversion import numpy_to_image
-from sepfm_ros.ros.results import read_results
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
 
 STEREO = bundled_bags_dir() / "synthetic_stereo"
 

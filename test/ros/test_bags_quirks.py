@@ -34,9 +34,10 @@ from sepfm_ros.evaluation.bags import load_bag_pairs
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.image_conversion import ImageDecodeError, check_compressed, message_to_numpy
-from sepfm_ros.ros.process import parse_params, run_process
-from sepfm_ros.ros.results import gt_error_px, read_results
+from sepfm_ros.ros.bags.results import gt_error_px, read_results
+from sepfm_ros.ros.msgs.image_conversion import ImageDecodeError, check_compressed, message_to_numpy
+from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.session.parameters import parse_params
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
 REPO = Path(__file__).resolve().parents[2]

@@ -21,16 +21,17 @@ from sensor_msgs.msg import CompressedImage
 
 from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.demo import bundled_bags_dir, isolate_ros_environment, replay_through_node
-from sepfm_ros.ros.bags.writer import BagWriter
-from sepfm_ros.ros.make_bag import (
+from sepfm_ros.ros.bags.results import MATCH_TABLE_DTYPE, read_results
+from sepfm_ros.ros.bags.synthesis import (
     SourceFrame,
     bag_messages,
     make_bag,
     shared_frames,
     synthetic_frames,
 )
-from sepfm_ros.ros.process import parse_params, run_process
-from sepfm_ros.ros.results import MATCH_TABLE_DTYPE, read_results
+from sepfm_ros.ros.bags.writer import BagWriter
+from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.session.parameters import parse_params
 
 SEED = 7
 # 20 pairs each: "an F for at least 95 % of frame pairs" then tolerates one lost pair (with 10

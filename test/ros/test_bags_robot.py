@@ -35,12 +35,13 @@ from sepfm_ros.ros.bags.errors import (
 )
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.results import gt_error_px, read_results
+from sepfm_ros.ros.bags.synthesis import SourceFrame, make_bag
 from sepfm_ros.ros.bags.types import IMAGE, header_stamp_ns
 from sepfm_ros.ros.bags.writer import BagWriter
-from sepfm_ros.ros.image_conversion import numpy_to_image
-from sepfm_ros.ros.make_bag import SourceFrame, make_bag
-from sepfm_ros.ros.process import parse_params, run_process
-from sepfm_ros.ros.results import gt_error_px, read_results
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
+from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.session.parameters import parse_params
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
 REPO = Path(__file__).resolve().parents[2]

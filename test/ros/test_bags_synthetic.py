@@ -10,9 +10,9 @@ import pytest
 
 from sepfm_ros.demo import bundled_bags_dir
 from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.synthesis import bag_messages, synthetic_frames
 from sepfm_ros.ros.bags.types import TYPESTORE
-from sepfm_ros.ros.image_conversion import message_to_numpy
-from sepfm_ros.ros.make_bag import bag_messages, synthetic_frames
+from sepfm_ros.ros.msgs.image_conversion import message_to_numpy
 from sepfm_ros.synthetic.scene import Camera, Plane, Scene, intrinsics, look_at, render
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 

@@ -19,7 +19,7 @@ from std_msgs.msg import Header
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import write_bag
-from sepfm_ros.ros.image_conversion import numpy_to_image
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
 from sepfm_ros.synthetic.sequences import stereo_sequence
 
 REPO_ROOT = Path(__file__).resolve().parents[2]

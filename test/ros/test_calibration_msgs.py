@@ -12,13 +12,13 @@ from std_msgs.msg import Header
 from sepfm_ros.geometry.calibrated.calibration_check import WARN, CalibrationStatus
 from sepfm_ros.geometry.calibrated.camera import CalibrationError
 from sepfm_ros.geometry.calibrated.pose import RelativePose
-from sepfm_ros.ros.calibration_msgs import (
+from sepfm_ros.ros.msgs.calibration import (
     calibration_error_status,
     calibration_status,
     camera_model_from_info,
     relative_transform,
 )
-from sepfm_ros.ros.messages import status_values
+from sepfm_ros.ros.msgs.diagnostics import status_values
 
 K = [718.856, 0.0, 607.1928, 0.0, 718.856, 185.2157, 0.0, 0.0, 1.0]
 

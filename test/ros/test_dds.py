@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 
 import pytest
 
-from sepfm_ros.ros import dds
+from sepfm_ros.ros.node import dds
 
 NS = "{http://www.eprosima.com/XMLSchemas/fastRTPS_Profiles}"
 MIB = 1024 * 1024

@@ -12,7 +12,7 @@ import pytest
 from rosbags.image.image import ENCODINGMAP
 from sensor_msgs.msg import CompressedImage, Image
 
-from sepfm_ros.ros.image_conversion import (
+from sepfm_ros.ros.msgs.image_conversion import (
     SUPPORTED_ENCODINGS,
     ImageDecodeError,
     check_compressed,

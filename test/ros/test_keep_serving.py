@@ -14,7 +14,7 @@ from rclpy.context import Context  # noqa: E402
 from rclpy.executors import SingleThreadedExecutor  # noqa: E402
 from rclpy.node import Node  # noqa: E402
 
-from sepfm_ros.ros.keep_serving import ThrottledLog, guarded  # noqa: E402
+from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded  # noqa: E402
 
 TIMEOUT = 60.0  # s; the machine is shared
 

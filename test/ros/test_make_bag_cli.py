@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import fundamental_from_cameras
-from sepfm_ros.ros import make_bag
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.image_conversion import message_to_numpy
+from sepfm_ros.ros.commands import make_bag
+from sepfm_ros.ros.msgs.image_conversion import message_to_numpy
 
 
 @pytest.mark.parametrize(

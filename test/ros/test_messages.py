@@ -1,4 +1,4 @@
-"""Output messages: the typed answer of a pair (:mod:`sepfm_ros.ros.answer`) and the ground
+"""Output messages: the typed answer of a pair (:mod:`sepfm_ros.ros.session.answer`) and the ground
 truth's F image (pure functions, no DDS)."""
 
 from __future__ import annotations
@@ -15,7 +15,15 @@ from sepfm_ros.geometry import Estimate
 from sepfm_ros.geometry.estimate import StatusCode
 from sepfm_ros.pipeline.features import Matches
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig, PipelineResult
-from sepfm_ros.ros.answer import (
+from sepfm_ros.ros.bags.results import match_table
+from sepfm_ros.ros.msgs.fundamental import (
+    fundamental_from_image,
+    fundamental_from_msg,
+    fundamental_to_image,
+)
+from sepfm_ros.ros.msgs.headers import stamp_ns
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
+from sepfm_ros.ros.session.answer import (
     ESTIMATOR_INPUT,
     AnswerSettings,
     BadInput,
@@ -29,10 +37,6 @@ from sepfm_ros.ros.answer import (
     internal_error_answer,
     match_array,
 )
-from sepfm_ros.ros.image_conversion import numpy_to_image
-from sepfm_ros.ros.messages import fundamental_from_image, fundamental_to_image, stamp_ns
-from sepfm_ros.ros.results import match_table
-from sepfm_ros.ros.typed_msgs import fundamental_from_msg
 
 HEADER = Header(stamp=Time(sec=12, nanosec=345), frame_id="left_cam")
 HEADERS = PairHeaders(HEADER, HEADER, Header(stamp=Time(sec=12, nanosec=999), frame_id="right_cam"))
@@ -169,7 +173,7 @@ def test_decode_pair_refuses_a_frame_size_change_of_one_camera_only():
 def test_stamp_ns():
     from builtin_interfaces.msg import Time
 
-    from sepfm_ros.ros.messages import stamp_ns
+    from sepfm_ros.ros.msgs.headers import stamp_ns
 
     assert stamp_ns(Time(sec=3, nanosec=250)) == 3_000_000_250
     assert stamp_ns(Time(sec=-2, nanosec=999_999_999)) == -1_000_000_001

@@ -24,8 +24,8 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
 from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections  # noqa: E402
-from sepfm_ros.ros.make_bag import camera_info_message, camera_infos  # noqa: E402
-from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
+from sepfm_ros.ros.bags.synthesis import camera_info_message, camera_infos  # noqa: E402
+from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
 
 NS = "/cal"
 NODE = "sepfm_calib"

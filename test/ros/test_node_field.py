@@ -22,9 +22,9 @@ from rclpy.qos import QoSProfile, qos_profile_sensor_data  # noqa: E402
 from ros_helpers import image_msg, send_pair, start_node  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
-from sepfm_ros.ros import dds  # noqa: E402
-from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
-from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
+from sepfm_ros.ros.node import dds  # noqa: E402
 
 # ROS 2's default publisher QoS (reliable, keep-last 10), as a camera driver's publisher has it
 DEFAULT_QOS = QoSProfile(depth=10)

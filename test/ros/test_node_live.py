@@ -34,8 +34,8 @@ from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
 from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance  # noqa: E402
-from sepfm_ros.ros.image_conversion import numpy_to_compressed  # noqa: E402
-from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence  # noqa: E402
 
 KITTI_STEREO = [

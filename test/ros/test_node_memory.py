@@ -17,7 +17,7 @@ def test_malloc_settings_apply_on_glibc_and_are_harmless_elsewhere():
     # process-wide settings: in a child process, so the test process's allocator stays as is
     on_glibc = platform.libc_ver()[0] == "glibc" and ctypes.util.find_library("c") is not None
     code = (
-        "from sepfm_ros.ros import memory\n"
+        "from sepfm_ros.ros.node import memory\n"
         "print(memory.configure_malloc())\n"
         "memory.release_free_memory()\n"  # no-op without glibc; must not raise either way
     )

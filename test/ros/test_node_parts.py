@@ -332,7 +332,7 @@ def test_log_throttle_message_says_what_was_held_back():
 def test_offered_reliability_matches_every_publisher():
     from rclpy.qos import ReliabilityPolicy
 
-    from sepfm_ros.ros.subscriptions import offered_reliability
+    from sepfm_ros.ros.node.subscriptions import offered_reliability
 
     rel = SimpleNamespace(reliability=ReliabilityPolicy.RELIABLE)
     be = SimpleNamespace(reliability=ReliabilityPolicy.BEST_EFFORT)

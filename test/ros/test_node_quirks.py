@@ -14,7 +14,7 @@ from robot_bags import qoi_bytes  # noqa: E402
 from ros_helpers import header, image_msg, next_stamp, send_pair, start_node  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
-from sepfm_ros.ros.results import gt_error_px  # noqa: E402
+from sepfm_ros.ros.bags.results import gt_error_px  # noqa: E402
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence  # noqa: E402
 
 STEP_ZERO_NOTE = "images have step 0: read as packed rows"

@@ -13,7 +13,7 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from shell_jobs import as_background_job
 
-from sepfm_ros.ros.node_process import spin_until_shutdown
+from sepfm_ros.ros.node.spin import spin_until_shutdown
 
 
 @pytest.mark.parametrize(
@@ -65,7 +65,7 @@ NODE_FORBIDDEN += ("rosbags.highlevel", "tqdm", "matplotlib")
 def test_node_command_imports_no_bag_or_progress_bar_modules():
     pytest.importorskip("rclpy")
     code = (
-        "import sys, sepfm_ros.cli, sepfm_ros.ros.node_main;"
+        "import sys, sepfm_ros.cli, sepfm_ros.ros.commands.node;"
         f"bad = sorted(m for m in sys.modules if m.startswith({NODE_FORBIDDEN!r}));"
         "print(bad); sys.exit(1 if bad else 0)"
     )

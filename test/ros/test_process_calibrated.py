@@ -15,11 +15,12 @@ from sensor_msgs.msg import CameraInfo
 
 from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections
-from sepfm_ros.ros import make_bag
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.messages import stamp_ns
-from sepfm_ros.ros.process import parse_params, run_process
-from sepfm_ros.ros.results import read_results
+from sepfm_ros.ros.bags.results import read_results
+from sepfm_ros.ros.commands import make_bag
+from sepfm_ros.ros.msgs.headers import stamp_ns
+from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.session.parameters import parse_params
 
 N = 8
 TOPICS = ("/sepfm/relative_transform", "/sepfm/calibration_check")

@@ -17,9 +17,9 @@ from ros_helpers import image_msg
 from sepfm_ros.demo import bundled_bags_dir
 from sepfm_ros.evaluation.bags import load_bag_pairs
 from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.bags.results import read_results
 from sepfm_ros.ros.bags.types import IMAGE
 from sepfm_ros.ros.bags.writer import BagWriter
-from sepfm_ros.ros.results import read_results
 from sepfm_ros.synthetic.sequences import motion_sequence
 
 STEREO = bundled_bags_dir() / "synthetic_stereo"

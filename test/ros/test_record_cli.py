@@ -20,9 +20,9 @@ from rclpy.qos import qos_profile_sensor_data
 from sensor_msgs.msg import Image
 from std_msgs.msg import String
 
-from sepfm_ros.ros import dds
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.reader import BagReader
+from sepfm_ros.ros.node import dds
 
 
 def _recorded(bag: Path) -> int:

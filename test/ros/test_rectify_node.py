@@ -29,15 +29,10 @@ from sensor_msgs.msg import Image  # noqa: E402
 
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineResult  # noqa: E402
 from sepfm_ros.pipeline.rectification import rectify_uncalibrated  # noqa: E402
-from sepfm_ros.ros.answer import (  # noqa: E402
-    AnswerSettings,
-    PairHeaders,
-    estimate_message,
-    match_array,
-)
-from sepfm_ros.ros.image_conversion import image_to_numpy  # noqa: E402
-from sepfm_ros.ros.messages import stamp_ns  # noqa: E402
-from sepfm_ros.ros.typed_msgs import fundamental_field  # noqa: E402
+from sepfm_ros.ros.msgs.fundamental import fundamental_field  # noqa: E402
+from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import image_to_numpy  # noqa: E402
+from sepfm_ros.ros.session.answer import AnswerSettings, PairHeaders, estimate_message, match_array  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_rectify  # noqa: E402

@@ -34,7 +34,7 @@ from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 
 from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
 from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
-from sepfm_ros.ros.replay import Replayer  # noqa: E402
+from sepfm_ros.ros.node.replayer import Replayer  # noqa: E402
 
 N_FRAMES = 4
 HAVE_TF2_MSGS = importlib.util.find_spec("tf2_msgs") is not None

@@ -24,9 +24,9 @@ from ros_helpers import REPO, Ros, image_msg, start_node  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
 
 from sepfm_ros.ros.bags.reader import BagReader  # noqa: E402
+from sepfm_ros.ros.bags.results import read_results  # noqa: E402
 from sepfm_ros.ros.bags.types import IMAGE  # noqa: E402
 from sepfm_ros.ros.bags.writer import BagWriter  # noqa: E402
-from sepfm_ros.ros.results import read_results  # noqa: E402
 from sepfm_ros.synthetic.sequences import motion_sequence  # noqa: E402
 
 SEED = 20261123

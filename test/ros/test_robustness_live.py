@@ -34,7 +34,7 @@ from ros_helpers import (  # noqa: E402
 from sensor_msgs.msg import CompressedImage, Image  # noqa: E402
 
 from sepfm_msgs.msg import TwoViewEstimate  # noqa: E402
-from sepfm_ros.ros.image_conversion import (  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import (  # noqa: E402
     ImageDecodeError,
     check_compressed,
     message_to_numpy,

@@ -1,4 +1,4 @@
-"""The stop handlers of the long-running commands (sepfm_ros.ros.signals), with real signals."""
+"""The stop handlers of the long-running commands (ros/node/signals.py), with real signals."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from sepfm_ros.ros.signals import DeferredStop, install_stop_handlers, restore_handlers
+from sepfm_ros.ros.node.signals import DeferredStop, install_stop_handlers, restore_handlers
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])

@@ -31,7 +31,7 @@ from sepfm_ros.ros.bags.types import (  # noqa: E402
     sepfm_msgs_share,
 )
 from sepfm_ros.ros.bags.writer import BagWriter  # noqa: E402
-from sepfm_ros.ros.typed_msgs import fundamental_field, fundamental_from_msg  # noqa: E402
+from sepfm_ros.ros.msgs.fundamental import fundamental_field, fundamental_from_msg
 
 REPO = Path(__file__).resolve().parents[2]
 DDS_TIMEOUT_S = 60.0  # generous: discovery on a loaded 2-core machine

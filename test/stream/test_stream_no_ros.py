@@ -81,7 +81,7 @@ def test_a_planted_ros_import_fails_the_check(tmp_path):
     pkg.mkdir()
     (pkg / "__init__.py").write_text("")
     (pkg / "clean.py").write_text("from sepfm_ros.stream.sync import ApproximateTimeSync\n")
-    (pkg / "careless.py").write_text("from sepfm_ros.ros.messages import stamp_ns\n")
+    (pkg / "careless.py").write_text("from sepfm_ros.ros.msgs.headers import stamp_ns\n")
     r = import_without_ros("planted_stream", extra_path=tmp_path)
     assert r.returncode != 0
     assert "blocked ROS import" in r.stderr, r.stderr

@@ -3,7 +3,7 @@
 A :class:`CameraModel` holds the fields of ``sensor_msgs/CameraInfo`` as numpy arrays: K (3x3),
 D (distortion coefficients), the distortion model, R (3x3 rectifying rotation), P (3x4 projection
 of the rectified camera) and the image size. No ROS: the adapter in
-``sepfm_ros.ros.calibration_msgs`` fills it from a message.
+``sepfm_ros.ros.msgs.calibration`` fills it from a message.
 
 Two kinds of input images exist and the model of each says which pixels the estimator sees:
 

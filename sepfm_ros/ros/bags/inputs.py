@@ -22,7 +22,7 @@ from dataclasses import dataclass
 from sepfm_ros.ros.bags.errors import BagError, TopicNotFoundError
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import COMPRESSED_IMAGE, GROUND_TRUTH_TOPIC, IMAGE_TYPES
-from sepfm_ros.ros.messages import camera_info_topic
+from sepfm_ros.ros.msgs.headers import camera_info_topic
 
 COMPRESSED_SUFFIX = "/compressed"
 NOT_CAMERA_SUFFIXES = ("/fundamental", "/debug_image")

@@ -1,0 +1,100 @@
+"""ROS messages of calibrated estimation: CameraInfo in, pose and calibration check out.
+
+- :func:`camera_model_from_info`: ``sensor_msgs/CameraInfo`` (rclpy or rosbags message) ->
+  validated :class:`~sepfm_ros.geometry.calibrated.camera.CameraModel` (CalibrationError with
+  the reason).
+- :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
+  in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
+- :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+from diagnostic_msgs.msg import DiagnosticStatus
+from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+from scipy.spatial.transform import Rotation
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
+from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
+from sepfm_ros.ros.msgs.diagnostics import health_status
+from sepfm_ros.ros.msgs.headers import copy_header
+
+CALIBRATION_STATUS_SUFFIX = ": calibration"
+
+
+def camera_model_from_info(msg: Any, image_size: tuple[int, int] | None = None) -> CameraModel:
+    """A validated camera model from a ``sensor_msgs/CameraInfo``.
+
+    Args:
+        msg: the CameraInfo (rclpy or rosbags message: fields k, d, distortion_model, r, p,
+            width, height, binning_x/y, roi).
+        image_size: (width, height) of the images it is paired with, when known.
+    Raises:
+        CalibrationError: zero K, NaN, wrong sizes, unknown distortion model, binning or a
+            region of interest (not supported), calibration for another image size.
+    """
+    bx, by = int(getattr(msg, "binning_x", 0)), int(getattr(msg, "binning_y", 0))
+    if bx > 1 or by > 1:
+        raise CalibrationError(f"binning {bx}x{by} is not supported")
+    roi = getattr(msg, "roi", None)
+    if roi is not None and int(roi.width) and int(roi.height):
+        full = (int(roi.x_offset), int(roi.y_offset), int(roi.width), int(roi.height))
+        if full != (0, 0, int(msg.width), int(msg.height)):
+            raise CalibrationError(f"a region of interest {full} is not supported")
+    return camera_model(
+        msg.k, msg.d, msg.distortion_model, msg.r, msg.p, msg.width, msg.height, image_size
+    )
+
+
+def relative_transform(
+    pose: RelativePose, header: Header, frame_a: str, frame_b: str
+) -> TransformStamped:
+    """The pose of camera b in camera a's optical frame as a TransformStamped.
+
+    Args:
+        pose: (R, t) with ``X_b = R X_a + t``; t unit (motion) or metres (stereo, scaled).
+        header: the pair's header (its stamp is used); ``frame_id`` is set to ``frame_a``.
+        frame_a, frame_b: optical frame ids of camera a (parent) and b (child).
+    """
+    R_ba, p_ba = pose_of_b_in_a(pose.R, pose.t)
+    x, y, z, w = Rotation.from_matrix(R_ba).as_quat()
+    hdr = copy_header(header)
+    hdr.frame_id = frame_a
+    return TransformStamped(
+        header=hdr,
+        child_frame_id=frame_b,
+        transform=Transform(
+            translation=Vector3(x=float(p_ba[0]), y=float(p_ba[1]), z=float(p_ba[2])),
+            rotation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
+        ),
+    )
+
+
+def calibration_status(
+    status: CalibrationStatus, node_name: str, hardware_id: str = ""
+) -> DiagnosticStatus:
+    """The stereo calibration check as ``DiagnosticStatus`` named ``<node>: calibration``."""
+    return health_status(
+        node_name + CALIBRATION_STATUS_SUFFIX,
+        bytes([status.level]),
+        status.message,
+        status.values,
+        hardware_id,
+    )
+
+
+def calibration_error_status(
+    error: CalibrationError, node_name: str, hardware_id: str = ""
+) -> DiagnosticStatus:
+    """ERROR status for unusable calibration input; the node keeps estimating F without it."""
+    return health_status(
+        node_name + CALIBRATION_STATUS_SUFFIX,
+        DiagnosticStatus.ERROR,
+        f"camera_info unusable, estimating without calibration: {error}",
+        {},
+        hardware_id,
+    )

@@ -1,0 +1,74 @@
+"""The node's publishers and what it publishes for a pair (the messages of
+:mod:`sepfm_ros.ros.session.answer`): ``~/estimate``, ``~/matches``, ``~/relative_transform``,
+``~/calibration_check``, ``~/debug_image``, and the ``/diagnostics`` report. All reliable,
+keep-last 10 (a consumer subscribed before the pair arrives gets every answer)."""
+
+from __future__ import annotations
+
+import time
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from geometry_msgs.msg import TransformStamped
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from sensor_msgs.msg import Image
+from std_msgs.msg import Header
+
+from sepfm_msgs.msg import MatchArray, TwoViewEstimate
+from sepfm_ros.pipeline.drawing import draw_result
+from sepfm_ros.ros.msgs.diagnostics import diagnostic_array
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
+from sepfm_ros.ros.session.answer import PairAnswer, add_timings
+
+
+class NodeOutputs:
+    """Publishers of the node ``node`` (created here)."""
+
+    def __init__(self, node: Node) -> None:
+        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+        self.estimate = node.create_publisher(TwoViewEstimate, "~/estimate", reliable)
+        self.matches = node.create_publisher(MatchArray, "~/matches", reliable)
+        self.debug = node.create_publisher(Image, "~/debug_image", reliable)
+        self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
+        self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
+        self.calibration = node.create_publisher(DiagnosticStatus, "~/calibration_check", reliable)
+
+    def answer(
+        self,
+        answer: PairAnswer,
+        images: tuple[np.ndarray, np.ndarray] | None = None,
+        epipolar_lines: int = 0,
+    ) -> float:
+        """Publish one pair's messages: pose and calibration check (where there are ones),
+        matches, then the estimate with the milliseconds spent publishing before it ("publish"
+        stage, returned); the debug image last, drawn only for a subscriber (``images``: the
+        decoded pair; none for a failure record)."""
+        t0 = time.perf_counter()
+        if answer.transform is not None:
+            self.pose.publish(answer.transform)
+        if answer.calibration is not None:
+            self.calibration.publish(answer.calibration)
+        self.matches.publish(answer.matches)
+        publish_ms = (time.perf_counter() - t0) * 1e3
+        add_timings(answer.estimate, {"publish": publish_ms})
+        self.estimate.publish(answer.estimate)
+        result = answer.result
+        if result is not None and images is not None and self.debug.get_subscription_count() > 0:
+            canvas = draw_result(*images, result, epipolar_lines)
+            self.debug.publish(numpy_to_image(canvas, "bgr8", answer.estimate.header))
+        return publish_ms
+
+    def report(self, stamp: Any, statuses: list[DiagnosticStatus]) -> None:
+        """Publish ``statuses`` on /diagnostics under ``stamp``."""
+        self.diagnostics.publish(diagnostic_array(Header(stamp=stamp, frame_id=""), statuses))
+
+    def subscribers(self) -> dict[str, int]:
+        """Matched subscribers: the fewest over the estimate and matches, and of
+        ~/debug_image."""
+        results = min(p.get_subscription_count() for p in (self.estimate, self.matches))
+        return {
+            "output_subscribers": results,
+            "debug_image_subscribers": self.debug.get_subscription_count(),
+        }

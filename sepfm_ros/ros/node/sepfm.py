@@ -1,0 +1,548 @@
+"""The live two-view geometry node ``sepfm``: images in, typed estimates and matches out.
+
+Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-args ...``).
+
+This module wires the parts together; each lives in its own module:
+
+- :mod:`sepfm_ros.ros.session.parameters`: the parameters, their validation and the pipeline config;
+- :mod:`sepfm_ros.ros.node.subscriptions`: the image topics (remaps, ``compressed``) and their QoS;
+- :mod:`sepfm_ros.stream.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
+  reset when stamps jump back;
+- :mod:`sepfm_ros.stream.scheduling`: the latest-only slots between the executor and the two
+  worker threads, and the policy when pairs come faster than the node processes them;
+- :mod:`sepfm_ros.stream.health`: counters, recent problems and the ``/diagnostics`` level.
+
+Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
+fields, pair frames and offer the pair to the scheduler. Two worker threads then run the
+:class:`~sepfm_ros.pipeline.pipeline.Pipeline` one pair apart: ``sepfm-match`` decodes the images,
+detects features (each frame once, cached by stamp; in stereo mode the right image on a helper
+thread) and matches them; ``sepfm-estimate`` runs the estimator (``max_samples`` caps its RANSAC
+samples) and publishes. Each pair goes through exactly the calls of :meth:`Pipeline.process`, so
+results equal offline processing. docs/design.md gives the reasons and measurements.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from diagnostic_msgs.msg import DiagnosticStatus
+from rcl_interfaces.msg import SetParametersResult
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from sensor_msgs.msg import CompressedImage, Image
+from std_msgs.msg import Header
+
+from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
+from sepfm_ros.pipeline.pipeline import (
+    MatchedPair,
+    Pipeline,
+    PipelineConfig,
+    name_native_thread,
+)
+from sepfm_ros.ros.msgs.diagnostics import health_status
+from sepfm_ros.ros.msgs.headers import copy_header, stamp_ns
+from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
+from sepfm_ros.ros.node.camera_info import CameraInfoInputs
+from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
+from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
+from sepfm_ros.ros.node.memory import release_free_memory
+from sepfm_ros.ros.node.outputs import NodeOutputs
+from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
+from sepfm_ros.ros.session.answer import (
+    AnswerSettings,
+    BadInput,
+    PairAnswer,
+    PairCalibration,
+    PairHeaders,
+    add_timings,
+    answer_matched,
+    decode_pair,
+    failure_answer,
+    internal_error_answer,
+    internal_error_kind,
+    internal_error_text,
+    precheck,
+)
+from sepfm_ros.ros.session.calibrated import CalibratedStream, CamerasUpdate
+from sepfm_ros.ros.session.parameters import (
+    NODE_NAME,
+    PARAMS,
+    change_errors,
+    descriptor,
+    monitor_config,
+    parameter_error,
+    pipeline_config,
+)
+from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health
+from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
+from sepfm_ros.stream.scheduling import PairScheduler
+from sepfm_ros.stream.sync import LEFT, RIGHT
+
+LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
+
+
+@dataclass
+class Job:
+    """A pair waiting for the worker: a = left/earlier, b = right/current."""
+
+    msg_a: Any
+    msg_b: Any
+    received: float  # time.monotonic() at receipt of the newer message
+    header: Header  # header of the newer image (copied to every output)
+    key_a: Any
+    key_b: Any
+
+    def headers(self) -> PairHeaders:
+        """The pair's output header and its images' headers."""
+        return PairHeaders(self.header, self.msg_a.header, self.msg_b.header)
+
+
+@dataclass
+class MatchedJob:
+    """A matched pair waiting for the estimate thread, or the failure record of a pair that
+    could not be matched (``failure``: published by the estimate thread too, so answers leave
+    in pair order)."""
+
+    job: Job
+    matched: MatchedPair | None
+    images: tuple[np.ndarray, np.ndarray] | None  # decoded a, b (for ~/debug_image)
+    wait_ms: float  # receipt -> start of processing (decode)
+    matched_at: float  # time.monotonic() when matching ended
+    failure: PairAnswer | None = None
+
+
+class SepfmNode(Node):
+    """The ``sepfm`` node (see the module docstring)."""
+
+    def __init__(
+        self, node_name: str = NODE_NAME, dds: DdsSetup | None = None, **kwargs: Any
+    ) -> None:
+        """``dds``: the process's Fast DDS setup (:func:`sepfm_ros.ros.node.dds.configure_dds`), for
+        the log, ``/diagnostics`` and the advice on lost samples (None: not configured)."""
+        super().__init__(node_name, **kwargs)
+        self._dds = dds or DdsSetup(False, UNCONFIGURED)
+        for name, spec in PARAMS.items():
+            self.declare_parameter(name, spec.default, descriptor(name, spec))
+        values = self._param_values()
+        errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
+        if errors:
+            raise ValueError("invalid parameters: " + "; ".join(errors))
+        self._mode = values["mode"]
+        self._transport = values["transport"]
+        self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
+
+        self._lock = threading.Lock()  # guards the settings below and the pairing
+        self._pending_config: PipelineConfig | None = None
+        self._epipolar_lines = int(values["debug_epipolar_lines"])
+        self._publish_unreliable = bool(values["publish_unreliable"])
+        self._scheduler: PairScheduler[Job, MatchedJob] = PairScheduler()
+        self._pipeline = Pipeline(pipeline_config(values), cache_size=8, parallel_detect=True)
+        jump_s = float(values["stamp_jump_reset_s"])
+        self._stereo: StereoPairing[tuple[Any, float]] = StereoPairing(
+            int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"]), jump_s
+        )
+        self._motion: MotionPairing[tuple[Any, float]] = MotionPairing(
+            int(values["frame_gap"]), jump_s
+        )
+        names = ("left", "right") if self._mode == "stereo" else ("image",)
+        self._health = Health(names, float(values["input_timeout_s"]))
+        self._log = ThrottledLog(self)
+        self._reported_stall: str | None = None
+        self._pending_monitor: MonitorConfig | None = None
+
+        self._out = NodeOutputs(self)
+
+        msg_type = CompressedImage if self._transport == "compressed" else Image
+        if self._mode == "stereo":
+            inputs = [
+                ("left/image_raw", lambda m: self._on_stereo(m, LEFT)),
+                ("right/image_raw", lambda m: self._on_stereo(m, RIGHT)),
+            ]
+        else:
+            inputs = [("image_raw", self._on_motion)]
+        self._subs = [
+            InputSubscription(
+                self,
+                input_topic(self, base, self._transport),
+                msg_type,
+                callback,
+                values["input_reliability"],
+                on_lost=self._on_lost,
+                on_incompatible=self._on_incompatible,
+                on_created=self._on_subscribed,
+            )
+            for base, callback in inputs
+        ]
+        bases = [base for base, _ in inputs]
+        rectified = values["images"] == "rectified" or (
+            values["images"] == "auto" and any("rect" in self.resolve_topic_name(b) for b in bases)
+        )
+        self._calibrated = CalibratedStream(
+            self._mode == "stereo",
+            rectified,
+            monitor_config(values),
+            self.get_name(),
+            self.get_fully_qualified_name(),
+        )
+        self._camera_info = None
+        if values["use_camera_info"]:
+            self._camera_info = CameraInfoInputs(
+                self,
+                bases,
+                values["input_reliability"],
+                on_lost=self._on_lost,
+                on_incompatible=self._on_incompatible,
+                on_created=self._on_subscribed,
+            )
+        self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
+        self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
+        self._workers = [
+            threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
+            threading.Thread(target=self._estimate_loop, name="sepfm-estimate", daemon=True),
+        ]
+        for worker in self._workers:
+            worker.start()
+        self.get_logger().info(
+            f"{self._mode} mode, {self._transport} transport, input reliability "
+            f"{values['input_reliability']}, listening on "
+            f"{', '.join(s.topic for s in self._subs)}; {self._pipeline.config}"
+        )
+
+    # ---------------------------------------------------------------- parameters
+    def _param_values(self) -> dict[str, Any]:
+        return {name: self.get_parameter(name).value for name in PARAMS}
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        changes = {p.name: p.value for p in params}
+        reasons = change_errors(self._param_values(), changes)
+        if reasons:
+            reason = "; ".join(reasons)
+            self.get_logger().warning(f"parameter change rejected: {reason}")
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        values = self._param_values()
+        config = pipeline_config(values)
+        jump_s = float(values["stamp_jump_reset_s"])
+        with self._lock:
+            self._pending_config = config
+            self._epipolar_lines = int(values["debug_epipolar_lines"])
+            self._publish_unreliable = bool(values["publish_unreliable"])
+            self._pending_monitor = monitor_config(values)
+            self._health.input_timeout_s = float(values["input_timeout_s"])
+            self._stereo.configure(
+                int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"]), jump_s
+            )
+            self._motion.configure(int(values["frame_gap"]), jump_s)
+        self.get_logger().info(
+            "parameters set: " + ", ".join(f"{p.name}={p.value!r}" for p in params)
+        )
+
+    # ---------------------------------------------------------------- input callbacks
+    def internal_error(self, kind: str, text: str) -> None:
+        """An exception in a callback (:func:`guarded`): ERROR level in /diagnostics, logged."""
+        self._health.problem(kind)
+        self._log.log(kind, text)
+
+    def _bad_input(self, kind: str, text: str) -> None:
+        """Count a bad message by kind and log it (throttled per kind)."""
+        self._health.problem(kind)
+        self._log.log(kind, f"skipping bad input ({kind}): {text}")
+
+    @guarded
+    def _on_lost(self, topic: str, count: int) -> None:
+        if count <= 0:
+            return
+        self._health.lost_samples(topic, count)
+        advice = self._dds.lost_sample_advice()
+        self._log.log(
+            "lost_samples", f"{count} samples of {topic} lost in transport: {advice}", error=False
+        )
+
+    @guarded
+    def _on_incompatible(self, topic: str, policy: str) -> None:
+        self._health.problem("incompatible_qos")
+        self._log.log(
+            "incompatible_qos",
+            f"a publisher of {topic} has an incompatible QoS ({policy}) and is not received; "
+            "restart the node with input_reliability:=best_effort to receive every publisher",
+        )
+
+    @guarded
+    def _on_subscribed(self, topic: str, reliability: str) -> None:
+        self.get_logger().info(f"subscribed to {topic} ({reliability})")
+
+    def _precheck(self, msg: Any, topic: str) -> bool:
+        """Cheap field validation in the callback (no pixel access); False when skipped."""
+        bad = precheck(msg)
+        if bad is not None:
+            self._bad_input(bad.kind, f"{topic}: {bad.text}")
+            return False
+        if getattr(msg, "step", None) == 0 and (note := self._zero_step.note(topic, msg)):
+            self.get_logger().warning(note)
+        return True
+
+    def _offer(self, job: Job) -> None:
+        self._health.pair_formed()
+        self._scheduler.offer(job, job.received)
+
+    def _stamp_jumped(self, topic: str, stamp: int) -> None:
+        self._health.stamp_jump()
+        self._health.restart_pairing()
+        self._scheduler.reset_input()
+        self._log.log(
+            "stamp_jump",
+            f"{topic} stamps jumped back to {stamp / 1e9:.3f} s (a looped bag, a restarted "
+            "driver or simulator): pairing restarted from this frame",
+            error=False,
+        )
+
+    @guarded
+    def _on_stereo(self, msg: Any, side: int) -> None:
+        topic = "left" if side == LEFT else "right"
+        received = self._health.input(topic)
+        if not self._precheck(msg, topic):
+            return
+        stamp = stamp_ns(msg.header.stamp)
+        with self._lock:
+            out: PairOutcome = self._stereo.add(side, Frame((msg, received), stamp))
+            run = self._stereo.resets  # after a restart the same stamps may be other images
+            offset = self._stereo.offset_ns()
+        if offset is not None:
+            self._health.stereo_offset(offset)
+        if out.reset:
+            self._stamp_jumped(topic, stamp)
+        if out.pair is None:
+            return
+        (left, t_left), (right, t_right) = out.pair[0].item, out.pair[1].item
+        ns_l, ns_r = out.pair[0].stamp_ns, out.pair[1].stamp_ns
+        header = copy_header(left.header)
+        job = Job(left, right, max(t_left, t_right), header, (run, "l", ns_l), (run, "r", ns_r))
+        self._offer(job)
+
+    @guarded
+    def _on_motion(self, msg: Any) -> None:
+        received = self._health.input("image")
+        if not self._precheck(msg, "image"):
+            return
+        stamp = stamp_ns(msg.header.stamp)
+        with self._lock:
+            out: PairOutcome = self._motion.add(Frame((msg, received), stamp))
+            run = self._motion.resets
+        if out.reset:
+            self._stamp_jumped("image", stamp)
+        if out.late:
+            self._bad_input("stamp_not_increasing", f"frame stamp {stamp} ns is not after the last")
+            return
+        if out.pair is None:
+            return
+        first = out.pair[0]
+        self._offer(
+            Job(
+                first.item[0],
+                msg,
+                received,
+                copy_header(msg.header),
+                (run, first.stamp_ns),
+                (run, stamp),
+            )
+        )
+
+    # ---------------------------------------------------------------- workers
+    def _match_loop(self) -> None:
+        """Thread ``sepfm-match``: newest pair -> decoded images -> matches -> estimate thread."""
+        name_native_thread()
+        while True:
+            offered = self._scheduler.take_for_match()
+            if offered is None:
+                return
+            job = offered.job
+            with self._lock:
+                config, self._pending_config = self._pending_config, None
+            if config is not None:
+                self._pipeline.configure(config)
+            t0 = time.monotonic()
+            try:
+                matched = self._match(job)
+            except Exception as err:  # keep serving; count, log and answer
+                matched = self._failed(job, self._internal_error_answer(job, err))
+            if isinstance(matched, BadInput):
+                self._bad_input(matched.kind, matched.text)
+                answer = failure_answer(job.headers(), matched, self._settings())
+                matched = self._failed(job, answer)
+            self._scheduler.put_matched(matched, time.monotonic() - t0)
+
+    def _estimate_loop(self) -> None:
+        """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
+        name_native_thread()
+        while True:
+            taken = self._scheduler.take_for_estimate()
+            if taken is None:
+                return
+            matched, t0 = taken
+            try:
+                if matched.failure is not None:
+                    self._out.answer(matched.failure)
+                else:
+                    self._estimate_and_publish(matched)
+            except Exception as err:  # keep serving; count, log and answer
+                self._publish_answer(self._internal_error_answer(matched.job, err))
+            self._scheduler.estimate_done(t0)
+
+    def _internal_error_answer(self, job: Job, err: Exception) -> PairAnswer:
+        """Count and log an unexpected error of a pair; its answer (STATUS_INTERNAL_ERROR)."""
+        self._bad_input(internal_error_kind(err), internal_error_text(err))
+        return internal_error_answer(job.headers(), err, self._settings())
+
+    @staticmethod
+    def _failed(job: Job, answer: PairAnswer) -> MatchedJob:
+        """A pair that will not be estimated, with its failure record for the estimate thread."""
+        now = time.monotonic()
+        return MatchedJob(job, None, None, (now - job.received) * 1e3, now, answer)
+
+    def _publish_answer(self, answer: PairAnswer) -> None:
+        """Publish a pair's messages; a failure here (e.g. shutting down) never kills the worker."""
+        try:
+            self._out.answer(answer)
+        except Exception as err:  # noqa: BLE001 - keep serving
+            self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
+
+    def _settings(self, config: PipelineConfig | None = None) -> AnswerSettings:
+        with self._lock:
+            publish_unreliable = self._publish_unreliable
+        return AnswerSettings.of(config or self._pipeline.config, publish_unreliable)
+
+    def _match(self, job: Job) -> MatchedJob | BadInput:
+        started = time.monotonic()
+        wait_ms = (started - job.received) * 1e3
+        decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
+        if isinstance(decoded, BadInput):
+            return decoded
+        matched = self._pipeline.match(
+            *decoded.images, job.key_a, job.key_b, prior_timings_ms={"decode": decoded.decode_ms}
+        )
+        return MatchedJob(job, matched, decoded.images, wait_ms, time.monotonic())
+
+    def _calibration(self) -> PairCalibration | None:
+        """The stream's calibration and the latest camera_info (None without camera_info
+        input: the pair is estimated in image pixels). Estimate thread."""
+        with self._lock:
+            pending, self._pending_monitor = self._pending_monitor, None
+        if pending is not None:
+            self._calibrated.configure_monitor(pending)
+        if self._camera_info is None:
+            return None
+        return PairCalibration(self._calibrated, self._camera_info.latest())
+
+    def _log_cameras(self, update: CamerasUpdate | None) -> None:
+        """Count and log unusable camera_info; log a calibration newly in use."""
+        if update is None:
+            return
+        if update.error is not None:
+            self._health.problem("camera_info_invalid")
+            self._log.log("camera_info_invalid", f"camera_info unusable: {update.reason}")
+        elif update.changed:
+            calibration = self._calibrated.calibration
+            self.get_logger().info(
+                "camera_info in use: F in undistorted pixels of K"
+                + (", rectified images" if calibration.rectified else "")
+                + (
+                    f", no calibration check ({calibration.rig_problem})"
+                    if calibration.rig_problem
+                    else ""
+                )
+                + ("" if calibration.rig is None else ", stereo calibration check on")
+            )
+
+    def _estimate_and_publish(self, item: MatchedJob) -> None:
+        job = item.job
+        queue_ms = (time.monotonic() - item.matched_at) * 1e3
+        assert item.matched is not None  # failures are published as they are
+        answer = answer_matched(
+            self._pipeline,
+            job.headers(),
+            item.matched,
+            self._settings(item.matched.config),
+            self._calibration(),
+            {"wait": item.wait_ms, "queue": queue_ms},
+        )
+        self._log_cameras(answer.cameras_update)
+        if answer.estimate.bad_input_kind:  # the estimator refused the matches
+            self._bad_input(answer.estimate.bad_input_kind, answer.estimate.status_text)
+        if answer.calibration is not None:
+            with self._lock:
+                self._calib_status = answer.calibration
+        latency_ms = (time.monotonic() - job.received) * 1e3
+        add_timings(answer.estimate, {"latency": latency_ms})
+        self._out.answer(answer, item.images, self._epipolar_lines)
+        ok = answer.result is not None and answer.result.ok
+        self._health.answered(latency_ms, item.wait_ms, answer.has_f, ok)
+
+    # ---------------------------------------------------------------- health
+    def health(self) -> dict[str, Any]:
+        """The values of the /diagnostics report (rates over the last period)."""
+        values = self._health.values()
+        values.update(self._scheduler.snapshot())
+        # publishers matched by the input subscriptions (the fewest over the inputs): a player
+        # can wait for this before sending, since a message sent before matching is lost
+        values["input_publishers"] = min(s.publisher_count() for s in self._subs)
+        for sub, name in zip(self._subs, self._health.topics, strict=True):
+            values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
+        values["dds_input_transport"] = self._dds.describe()
+        if self._camera_info is not None:
+            # 1 once every camera's camera_info has arrived (a player can wait for it before the
+            # first images, so the first pair is answered with the calibration too)
+            values["camera_info_ready"] = int(self._camera_info.latest() is not None)
+        # subscribers matched by the result publishers (the fewest over estimate and matches) and by
+        # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
+        values.update(self._out.subscribers())
+        # motion mode: each frame detected once (its features are cached by stamp)
+        values["images_detected"] = self._pipeline.images_detected
+        values["images_features_cached"] = self._pipeline.images_cached
+        if self._mode == "stereo":
+            with self._lock:
+                stats = self._stereo.stats
+                values["sync_unmatched"] = stats.unmatched + stats.evicted
+                values["sync_late"] = stats.late
+        return values
+
+    @guarded
+    def _check_level_change(self) -> None:
+        """Report at once when one camera stalls or comes back (between periodic reports)."""
+        stall = self._health.stall()
+        if (stall is None) != (self._reported_stall is None):
+            self._report_health()
+
+    @guarded
+    def _report_health(self) -> None:
+        release_free_memory()
+        values = self.health()
+        stall = self._health.stall()
+        level, message = self._health.level(stall)
+        self._reported_stall = stall
+        status = health_status(
+            f"{self.get_name()}: node",
+            LEVEL_BYTES[level],
+            message,
+            values,
+            self.get_fully_qualified_name(),
+        )
+        statuses = [status]
+        with self._lock:
+            if self._calib_status is not None:
+                statuses.append(self._calib_status)
+        self._out.report(self.get_clock().now().to_msg(), statuses)
+
+    def shutdown(self) -> None:
+        """Stop the worker threads (waits for the pairs in progress)."""
+        self._scheduler.stop()
+        for worker in self._workers:
+            worker.join(timeout=10.0)

@@ -116,13 +116,15 @@ def replay_through_node(
     from sepfm_ros.ros.node.recorder import Recorder
     from sepfm_ros.ros.node.replayer import Replayer
     from sepfm_ros.ros.session.parameters import parse_params
+    from sepfm_ros.ros.session.session import Session
 
     params = list(params or [])
     check_output_path(out)
     with BagReader(bag) as reader:
         spec = detect_inputs(reader)
         # log time (ns) of the message completing each pair the node forms (its pairing)
-        completions = [job.log_time_ns for job in iter_pairs(reader, spec, parse_params(params))]
+        session = Session(parse_params(params), spec.mode == "stereo", spec.topics)
+        completions = [job.log_time_ns for job in iter_pairs(reader, spec, session)]
     expected = len(completions)
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
     for p in params:

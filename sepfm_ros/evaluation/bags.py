@@ -6,7 +6,8 @@ Two kinds of bag are read (see :mod:`sepfm_ros.ros.bags.synthesis` and
 - an *input bag* with image topics (the ``--left``/``--right`` or ``--image`` topics when given,
   else picked from the bag as ``process`` does, see :mod:`sepfm_ros.ros.bags.inputs`) and
   ``/ground_truth/fundamental``: the pairs are the ones ``process`` forms
-  (:func:`sepfm_ros.ros.bags.pairing.iter_pairs`, default node parameters), each
+  (:func:`sepfm_ros.ros.bags.pairing.iter_pairs` with the session's pairing, at the node
+  parameters given by ``-p``/``--params-file``), each
   scored against the GT F with the pair's stamp. The decoded frames are written as PNG files into
   a folder (under the matches cache), so matches are cached by image content like manifest pairs.
 - a bag written by ``process`` (``/sepfm/...`` outputs plus the copied ground truth): the pairs are
@@ -20,6 +21,7 @@ module needs the ROS message packages (rclpy); the evaluation imports it only fo
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
@@ -40,7 +42,8 @@ from sepfm_ros.ros.bags.results import (
 from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
 from sepfm_ros.ros.msgs.headers import stamp_ns
 from sepfm_ros.ros.msgs.image_conversion import ImageDecodeError, pair_to_numpy
-from sepfm_ros.ros.session.parameters import parse_params
+from sepfm_ros.ros.session.parameters import GivenParams, ParameterError, given_params
+from sepfm_ros.ros.session.session import Session
 
 
 def is_bag(path: Path) -> bool:
@@ -60,17 +63,23 @@ def find_bags(path: Path) -> list[Path]:
 
 
 def _input_bag_pairs(
-    bag: Path, reader: BagReader, frames_dir: Path, topics: dict[str, str | None]
+    bag: Path, reader: BagReader, frames_dir: Path, inputs_of: BagInputs
 ) -> tuple[list[PairSpec], list[PairError]]:
-    spec = detect_inputs(reader, None, topics.get("left"), topics.get("right"), topics.get("image"))
-    params = parse_params([])
+    spec = detect_inputs(reader, None, inputs_of.left, inputs_of.right, inputs_of.image)
+    given = inputs_of.params or given_params()
+    params = given.values
     inputs = validate_inputs(reader, spec)
-    slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], False)
+    slop_given = "sync_slop_s" in given.given
+    slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], slop_given)
+    try:
+        session = Session(params, spec.mode == "stereo", spec.topics)
+    except ParameterError as err:
+        raise BagError(str(err)) from None
     gt = read_ground_truth(bag)
     pairs, errors = [], []
     out = frames_dir / bag.name
     out.mkdir(parents=True, exist_ok=True)
-    for job in iter_pairs(reader, spec, params, slop_ns):
+    for job in iter_pairs(reader, spec, session, slop_ns):
         stamp = stamp_ns(job.header.stamp)
         run = run_label(job.run)  # a looped bag's later passes get ids of their own
         pid = f"{bag.name}@{format_stamp(stamp)}{run}"
@@ -127,19 +136,26 @@ def _processed_bag_pairs(bag: Path) -> tuple[list[PairSpec], list[PairError]]:
     return pairs, errors
 
 
+@dataclass(frozen=True)
+class BagInputs:
+    """How input bags are read: their topics (None: picked from each bag) and the node's
+    parameters, whose pairing (the session's) forms the pairs (None: the defaults)."""
+
+    left: str | None = None
+    right: str | None = None
+    image: str | None = None
+    params: GivenParams | None = None
+
+
 def load_bag_pairs(
-    path: str | Path,
-    frames_dir: str | Path,
-    left: str | None = None,
-    right: str | None = None,
-    image: str | None = None,
+    path: str | Path, frames_dir: str | Path, inputs_of: BagInputs | None = None
 ) -> tuple[list[PairSpec], list[PairError]]:
     """Pairs with ground truth from a bag or a folder of bags.
 
     Args:
         path: a bag (directory, .mcap/.db3 or ROS 1 .bag) or a folder holding bags.
         frames_dir: where decoded frames of input bags are written (one subfolder per bag).
-        left, right, image: input topics of input bags (None: picked from each bag).
+        inputs_of: the input topics and parameters of input bags.
     Returns:
         (pairs, errors): errors name the bag (or pair) and the problem.
     """
@@ -157,12 +173,7 @@ def load_bag_pairs(
                     raise BagError(f"no {GROUND_TRUTH_TOPIC} topic: nothing to score against")
                 processed = bool(outputs & set(reader.topics))
                 if not processed:
-                    p, e = _input_bag_pairs(
-                        bag,
-                        reader,
-                        Path(frames_dir),
-                        {"left": left, "right": right, "image": image},
-                    )
+                    p, e = _input_bag_pairs(bag, reader, Path(frames_dir), inputs_of or BagInputs())
             if processed:
                 p, e = _processed_bag_pairs(bag)
         except BagError as exc:

@@ -13,9 +13,10 @@ truth, too few frames: the report is still written), 2 on bad arguments or an un
 manifest.
 
 ``--bags PATH`` (repeatable) adds pairs from a bag or a folder of bags with ground truth: input
-bags (pairs as ``process`` forms them; rosbag2 sqlite3/mcap or ROS 1 ``.bag``; input topics from
-``--left``/``--right`` or ``--image``, else picked from each bag) or bags written by ``process``
-(the node's own matches); see :mod:`sepfm_ros.evaluation.bags`.
+bags (pairs as ``process`` forms them: the session's pairing, with the node's parameters from
+``-p NAME:=VALUE`` and ``--params-file FILE``; rosbag2 sqlite3/mcap or ROS 1 ``.bag``; input
+topics from ``--left``/``--right`` or ``--image``, else picked from each bag) or bags written by
+``process`` (the node's own matches); see :mod:`sepfm_ros.evaluation.bags`.
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import argparse
 import shlex
 import sys
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 from sepfm_ros.evaluation.manifest import ManifestError, PairSpec, load_cameras, load_manifest
@@ -32,6 +34,18 @@ from sepfm_ros.evaluation.methods import REGISTRY, available_methods, resolve_me
 from sepfm_ros.evaluation.report import update_readme, write_report
 from sepfm_ros.evaluation.run import EvalConfig, evaluate
 from sepfm_ros.pipeline.features import FEATURES
+from sepfm_ros.ros.commands.options import add_param_arguments, add_topic_arguments
+
+
+@dataclass
+class Loaded:
+    """What the inputs gave: pairs, the reasons of those that cannot be evaluated, GT cameras
+    and the ``--bags`` paths that gave no pair."""
+
+    pairs: list[PairSpec] = field(default_factory=list)
+    errors: list = field(default_factory=list)
+    cameras: dict = field(default_factory=dict)
+    unusable_bags: list[str] = field(default_factory=list)
 
 
 def _int_list(text: str) -> tuple[int, ...]:
@@ -51,6 +65,13 @@ def build_parser() -> argparse.ArgumentParser:
         description="Evaluate fundamental-matrix estimators on image pairs with ground-truth F "
         "and write a markdown report with PNG figures.",
     )
+    _add_input_arguments(p)
+    _add_run_arguments(p)
+    return p
+
+
+def _add_input_arguments(p: argparse.ArgumentParser) -> None:
+    """Where the pairs come from: a manifest and/or bags (their topics and pairing)."""
     p.add_argument(
         "--manifest",
         type=Path,
@@ -65,11 +86,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="a bag, or a folder of bags, with /ground_truth/fundamental: input bags (images, "
         "as made by make_bag or recorded) or bags written by process; repeatable",
     )
-    p.add_argument("--left", metavar="TOPIC", help="--bags: stereo left image topic (with --right)")
-    p.add_argument(
-        "--right", metavar="TOPIC", help="--bags: stereo right image topic (with --left)"
-    )
-    p.add_argument("--image", metavar="TOPIC", help="--bags: motion image topic")
+    add_topic_arguments(p, prefix="--bags: ")
+    add_param_arguments(p, "sync_slop_s:=0.02, frame_gap:=2: the pairing of --bags")
     p.add_argument(
         "--root",
         type=Path,
@@ -83,6 +101,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="JSON of GT 3x4 cameras by image path, for relative-pose errors "
         "(default: cameras.json beside the manifest, when there is one)",
     )
+
+
+def _add_run_arguments(p: argparse.ArgumentParser) -> None:
+    """Matching, methods, seeds, thresholds and the report."""
     p.add_argument(
         "--out", type=Path, default=Path("eval_report"), help="report folder (default: eval_report)"
     )
@@ -143,7 +165,6 @@ def build_parser() -> argparse.ArgumentParser:
         help="also write the overall table between the eval-table markers of this file",
     )
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
-    return p
 
 
 def select_pairs(pairs: list[PairSpec], scenes: str, max_pairs: int) -> list[PairSpec]:
@@ -157,9 +178,8 @@ def select_pairs(pairs: list[PairSpec], scenes: str, max_pairs: int) -> list[Pai
     return pairs
 
 
-def main(argv: list[str]) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _checked(parser: argparse.ArgumentParser, args: argparse.Namespace) -> tuple:
+    """The match settings and methods of the arguments (exits with 2 on a bad argument)."""
     try:
         settings = MatchSettings(args.features, args.ratio, args.max_features)
         methods = resolve_methods(args.methods)
@@ -173,40 +193,49 @@ def main(argv: list[str]) -> int:
         parser.error(f"unknown --baseline {args.baseline!r}; known: {', '.join(REGISTRY)}")
     if args.manifest is None and not args.bags:
         parser.error("give --manifest and/or --bags")
-    cache_dir = None if str(args.cache).lower() == "none" else args.cache
-    pairs, errors, cameras = [], [], {}
-    unusable_bags: list[str] = []  # --bags that gave no pair: an error, whatever else ran
-    if args.manifest is not None:
-        try:
-            pairs, errors = load_manifest(args.manifest, args.root)
-            cameras = load_cameras(
-                args.cameras or Path(args.manifest).parent / "cameras.json",
-                args.root or Path(args.manifest).parent,
-            )
-        except ManifestError as exc:
-            print(f"sepfm_ros eval: {exc}", file=sys.stderr)
-            return 2
-    if args.bags:
-        from sepfm_ros.evaluation.bags import load_bag_pairs  # needs the ROS message packages
+    return settings, methods
 
-        frames_dir = (cache_dir or args.out) / "bag_frames"
-        for bag in args.bags:
-            p, e = load_bag_pairs(bag, frames_dir, args.left, args.right, args.image)
-            pairs += p
-            errors += e
-            if not p:
-                unusable_bags.append(str(bag))
-    pairs = select_pairs(pairs, args.scenes, args.max_pairs)
-    cache = MatchesCache(cache_dir, settings)
+
+def _bag_pairs(args: argparse.Namespace, frames_dir: Path, loaded: Loaded) -> None:
+    """Add the pairs of every ``--bags`` path (ParameterError on a bad -p/--params-file)."""
+    from sepfm_ros.evaluation.bags import BagInputs, load_bag_pairs  # needs the ROS packages
+    from sepfm_ros.ros.commands.options import given_params_of
+
+    inputs = BagInputs(args.left, args.right, args.image, given_params_of(args))
+    for bag in args.bags:
+        p, e = load_bag_pairs(bag, frames_dir, inputs)
+        loaded.pairs += p
+        loaded.errors += e
+        if not p:
+            loaded.unusable_bags.append(str(bag))
+
+
+def _load(args: argparse.Namespace, cache_dir: Path | None) -> Loaded:
+    """The pairs, load errors and GT cameras of the manifest and the bags (ManifestError,
+    ValueError on unusable input)."""
+    loaded = Loaded()
+    if args.manifest is not None:
+        loaded.pairs, loaded.errors = load_manifest(args.manifest, args.root)
+        loaded.cameras = load_cameras(
+            args.cameras or Path(args.manifest).parent / "cameras.json",
+            args.root or Path(args.manifest).parent,
+        )
+    if args.bags:
+        _bag_pairs(args, (cache_dir or args.out) / "bag_frames", loaded)
+    return loaded
+
+
+def _evaluate(args: argparse.Namespace, pairs: list[PairSpec], methods, cache, loaded) -> tuple:
+    """Run every method on every pair with every seed, with a progress bar; (result, s)."""
+    from tqdm import tqdm
+
     config = EvalConfig(args.threshold, args.confidence, tuple(args.seeds), args.baseline)
     total = len(pairs) * len(methods) * len(config.seeds)
     print(
         f"sepfm_ros eval: {len(pairs)} pairs x {len(methods)} methods x {len(config.seeds)} "
-        f"seeds = {total} runs ({len(errors)} pairs or bags rejected while loading)",
+        f"seeds = {total} runs ({len(loaded.errors)} pairs or bags rejected while loading)",
         file=sys.stderr,
     )
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
     with tqdm(
         total=total, unit="run", disable=args.no_progress, file=sys.stderr, dynamic_ncols=True
@@ -217,18 +246,42 @@ def main(argv: list[str]) -> int:
             bar.update(steps)
 
         res = evaluate(
-            pairs, methods, cache, config, errors=errors, progress=progress, cameras=cameras
+            pairs,
+            methods,
+            cache,
+            config,
+            errors=loaded.errors,
+            progress=progress,
+            cameras=loaded.cameras,
         )
-    elapsed = time.perf_counter() - t0
+    return res, time.perf_counter() - t0
+
+
+def main(argv: list[str]) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    settings, methods = _checked(parser, args)
+    cache_dir = None if str(args.cache).lower() == "none" else args.cache
+    try:
+        loaded = _load(args, cache_dir)
+    except (ManifestError, ValueError) as exc:
+        print(f"sepfm_ros eval: {exc}", file=sys.stderr)
+        return 2
+    pairs = select_pairs(loaded.pairs, args.scenes, args.max_pairs)
+    res, elapsed = _evaluate(args, pairs, methods, MatchesCache(cache_dir, settings), loaded)
     command = "sepfm_ros eval " + shlex.join(argv)
-    n_runs = len(res.runs)
+    return _report(args, res, command, elapsed, len(pairs), loaded.unusable_bags)
+
+
+def _report(args, res, command: str, elapsed: float, n_pairs: int, unusable_bags) -> int:
+    """Write the report (and the README table); the exit code."""
     notes = (
-        f"Run time: {elapsed:.0f} s for {n_runs} runs on this machine "
+        f"Run time: {elapsed:.0f} s for {len(res.runs)} runs on this machine "
         f"(including matching uncached pairs)."
     )
     if res.interrupted:
         notes = (
-            f"**Interrupted** after {len(res.pairs)} of {len(pairs)} pairs: the tables cover "
+            f"**Interrupted** after {len(res.pairs)} of {n_pairs} pairs: the tables cover "
             f"those pairs only. {notes}"
         )
     report = write_report(res, args.out, command=command, notes=notes)

@@ -120,7 +120,14 @@ def test_process_reads_step_zero_images_and_says_so_once(
 
 def test_calibration_check_reads_step_zero_images_and_says_so_once(frames, tmp_path):
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames, image=zero_step_image)
-    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    res = _cli(
+        "calibration_check",
+        str(bag),
+        "--out",
+        str(tmp_path / "check"),
+        "-p",
+        "calibration_min_pairs:=2",
+    )
     assert "Traceback" not in res.stderr and "decision: " in res.stdout, res.stdout + res.stderr
     assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout  # every pair decoded
     notes = [line for line in res.stdout.splitlines() if "step 0" in line]
@@ -161,7 +168,14 @@ def test_calibration_check_finds_camera_info_beside_slash_less_topics(frames, tm
     rel = ("camera/left/image_raw", "camera/right/image_raw")
     infos = ("/camera/left/camera_info", "/camera/right/camera_info")
     bag = write_robot_bag(bag_path(tmp_path, "ros1"), "ros1", frames, topics=rel, info_topics=infos)
-    res = _cli("calibration_check", str(bag), "--out", str(tmp_path / "check"), "--min-pairs", "2")
+    res = _cli(
+        "calibration_check",
+        str(bag),
+        "--out",
+        str(tmp_path / "check"),
+        "-p",
+        "calibration_min_pairs:=2",
+    )
     assert "Traceback" not in res.stderr and "has no camera_info" not in res.stderr, res.stderr
     assert f"calibration from {infos[0]} and {infos[1]}" in res.stdout, res.stdout
     assert f"[{N_FRAMES}/{N_FRAMES}]" in res.stdout and "decision: " in res.stdout

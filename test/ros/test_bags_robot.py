@@ -40,7 +40,7 @@ from sepfm_ros.ros.bags.synthesis import SourceFrame, make_bag
 from sepfm_ros.ros.bags.types import IMAGE, header_stamp_ns
 from sepfm_ros.ros.bags.writer import BagWriter
 from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
-from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.offline.process import ProcessInputs, run_process
 from sepfm_ros.ros.session.parameters import parse_params
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
@@ -145,8 +145,8 @@ def test_right_lag_needs_more_than_the_nodes_default_slop(kitti_frames, tmp_path
     bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", kitti_frames, right_lag_ns=LAG_NS)
     with pytest.raises(BagError, match="no stereo pairs: .* within 5.0 ms .* sync_slop_s"):
         run_process(
-            bag, tmp_path / "out", parse_params(["sync_slop_s:=0.005"]), progress=False,
-            slop_given=True,
+            bag, tmp_path / "out", parse_params(["sync_slop_s:=0.005"]),
+            ProcessInputs(slop_given=True), progress=False,
         )  # fmt: skip
     assert not (tmp_path / "out").exists()
 
@@ -308,7 +308,7 @@ def test_calibration_check_on_a_lagging_ros1_robot_bag(kitti_frames, shared_data
     out = tmp_path / "check"
     res = subprocess.run(
         [sys.executable, "-m", "sepfm_ros", "calibration_check", str(bag), "--out", str(out),
-         "--min-pairs", "2"],
+         "-p", "calibration_min_pairs:=2"],
         cwd=REPO, capture_output=True, text=True, timeout=300,
     )  # fmt: skip
     assert res.returncode == 0, res.stdout + res.stderr

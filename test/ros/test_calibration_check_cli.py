@@ -149,9 +149,9 @@ def test_robot_topic_names_and_a_lagging_right_camera(shared_data, tmp_path):
     with (out / "calibration_check.csv").open() as f:
         stamps = [int(row["stamp_ns"]) for row in csv.DictReader(f)]
     assert stamps == [1_000_000_000 + k * 100_000_000 for k in range(FRAMES)]  # every left frame
-    r = _run(bag, tmp_path / "out2", "--sync-slop", "0.005")
+    r = _run(bag, tmp_path / "out2", "-p", "sync_slop_s:=0.005")
     assert r.returncode == 2, r.stdout + r.stderr
-    assert "no stereo pairs" in r.stderr and "--sync-slop" in r.stderr, r.stderr
+    assert "no stereo pairs" in r.stderr and "sync_slop_s" in r.stderr, r.stderr
     assert "Traceback" not in r.stderr
 
 
@@ -174,7 +174,7 @@ def test_progress_counts_the_pairs_that_form(shared_data, tmp_path):
     with (out / "calibration_check.csv").open() as f:
         stamps = [int(row["stamp_ns"]) for row in csv.DictReader(f)]
     assert stamps == [1_000_000_000 + k * 100_000_000 for k in range(FRAMES) if k != 5]
-    r = _run(bag, tmp_path / "out2", "--max-pairs", "4", "--min-pairs", "3")
+    r = _run(bag, tmp_path / "out2", "--max-pairs", "4", "-p", "calibration_min_pairs:=3")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "checking 4 stereo pairs" in r.stdout and "[4/4]" in r.stdout, r.stdout
     assert "[5/" not in r.stdout

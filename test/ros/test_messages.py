@@ -30,13 +30,14 @@ from sepfm_ros.ros.session.answer import (
     DecodedPair,
     PairHeaders,
     answer_matched,
-    answer_pair,
     decode_pair,
     estimate_message,
     failure_answer,
     internal_error_answer,
     match_array,
 )
+from sepfm_ros.ros.session.parameters import parse_params
+from sepfm_ros.ros.session.session import Session
 
 HEADER = Header(stamp=Time(sec=12, nanosec=345), frame_id="left_cam")
 HEADERS = PairHeaders(HEADER, HEADER, Header(stamp=Time(sec=12, nanosec=999), frame_id="right_cam"))
@@ -183,10 +184,8 @@ def test_an_error_while_answering_gives_the_internal_error_record():
     """Images the pipeline cannot take (7 channels) make OpenCV raise inside the answer path:
     the pair still gets its record, STATUS_INTERNAL_ERROR with the reason, and no matches."""
     images = (np.zeros((40, 40, 7)), np.zeros((40, 40, 7)))
-    config = PipelineConfig()
-    answer = answer_pair(
-        Pipeline(config), HEADERS, DecodedPair(images, 0.0), AnswerSettings.of(config, True)
-    )
+    session = Session(parse_params([]), True, ["left/image_raw", "right/image_raw"])
+    answer = session.answer_decoded(HEADERS, DecodedPair(images, 0.0))
     assert answer.estimate.status == TwoViewEstimate.STATUS_INTERNAL_ERROR
     assert answer.estimate.status_text.startswith("internal error: error: OpenCV")
     assert answer.error is not None and answer.result is None

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import bisect
 import sys
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -36,6 +36,7 @@ from sepfm_ros.ros.session.answer import (
     PairHeaders,
     precheck,
 )
+from sepfm_ros.ros.session.session import Session
 from sepfm_ros.stream.pairing import Frame, MotionPairing, StereoPairing, stamp_order_effects
 from sepfm_ros.stream.sync import LEFT, RIGHT
 
@@ -118,10 +119,11 @@ class InputStamps:
                 )
         return lines
 
-    def pair_count(self, spec: InputSpec, params: dict[str, Any], slop_ns: int | None) -> int:
-        """How many pairs :func:`iter_pairs` will form (the node's pairing run on the stamps)."""
+    def pair_count(self, spec: InputSpec, session: Session, slop_ns: int | None) -> int:
+        """How many pairs :func:`iter_pairs` will form (the session's pairing run on the
+        stamps)."""
         events = ((topic, stamp, None, 0) for topic, stamp in self.sequence)
-        return sum(1 for _ in paired_frames(spec, params, slop_ns, events))
+        return sum(1 for _ in paired_frames(spec, session.pairing(slop_ns), events))
 
 
 @dataclass
@@ -137,38 +139,29 @@ class Paired:
 
 def paired_frames(
     spec: InputSpec,
-    params: dict[str, Any],
-    slop_ns: int | None,
+    pairing: StereoPairing[Any] | MotionPairing[Any],
     events: Iterable[tuple[str, int, Any, int]],
 ) -> Iterator[Paired]:
-    """The node's pairing (:mod:`sepfm_ros.stream.pairing`) of input events (topic, stamp ns,
-    item, log time ns) in bag order."""
-    jump_s = float(params["stamp_jump_reset_s"])
-    if spec.mode == "stereo":
-        if slop_ns is None:
-            slop_ns = int(round(params["sync_slop_s"] * 1e9))
-        stereo: StereoPairing[Any] = StereoPairing(slop_ns, int(params["sync_queue_size"]), jump_s)
-        for topic, stamp, item, log_time in events:
-            side = LEFT if topic == spec.topics[0] else RIGHT
-            out = stereo.add(side, Frame(item, stamp))
-            if out.pair is not None:
-                yield Paired(out.pair[0], out.pair[1], stereo.resets, log_time)
-    else:
-        motion: MotionPairing[Any] = MotionPairing(int(params["frame_gap"]), jump_s)
-        for _, stamp, item, log_time in events:
-            out = motion.add(Frame(item, stamp))
-            if out.pair is not None:
-                yield Paired(out.pair[0], out.pair[1], motion.resets, log_time)
+    """The stream's pairing (a new one from :meth:`~sepfm_ros.ros.session.session.Session.pairing`)
+    of input events (topic, stamp ns, item, log time ns) in bag order."""
+    for topic, stamp, item, log_time in events:
+        if isinstance(pairing, StereoPairing):
+            out = pairing.add(LEFT if topic == spec.topics[0] else RIGHT, Frame(item, stamp))
+        else:
+            out = pairing.add(Frame(item, stamp))
+        if out.pair is not None:
+            yield Paired(out.pair[0], out.pair[1], pairing.resets, log_time)
 
 
 def iter_pairs(
-    reader: BagReader, spec: InputSpec, params: dict[str, Any], slop_ns: int | None = None
+    reader: BagReader, spec: InputSpec, session: Session, slop_ns: int | None = None
 ) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
-    Pairing is the node's (:mod:`sepfm_ros.stream.pairing`): a frame whose stamp is not after its
-    topic's newest is skipped, a jump back of more than ``stamp_jump_reset_s`` restarts the
-    pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo), see :func:`pairing_slop_ns`.
+    Pairing is the session's (:meth:`~sepfm_ros.ros.session.session.Session.pairing`): a frame
+    whose stamp is not after its topic's newest is skipped, a jump back of more than
+    ``stamp_jump_reset_s`` restarts the pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo),
+    see :func:`pairing_slop_ns`.
     """
     msg_class = input_class(spec)
     zero_step = ZeroStepNotes()
@@ -183,7 +176,7 @@ def iter_pairs(
             yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"
-    for p in paired_frames(spec, params, slop_ns, events()):
+    for p in paired_frames(spec, session.pairing(slop_ns), events()):
         tags = ("l", "r") if stereo else ()
         yield PairJob(
             p.a.item,
@@ -261,9 +254,15 @@ class CameraInfos:
         return out
 
 
-def read_camera_infos(reader: BagReader, spec: InputSpec) -> CameraInfos | None:
-    """The camera_info beside each input topic, when the bag has them all (else None)."""
-    topics = camera_info_topics(reader, spec)
+def read_camera_infos(
+    reader: BagReader, spec: InputSpec, topics: Sequence[str | None] = ()
+) -> CameraInfos | None:
+    """The camera_info of each input camera, when the bag has them all (else None): the topics
+    given in ``topics`` (one per camera, None: the default), else the one beside each input
+    topic."""
+    beside = camera_info_topics(reader, spec)
+    given = list(topics) + [None] * (len(beside) - len(topics))
+    topics = tuple(beside[k] if t is None else reader.resolve(t) for k, t in enumerate(given))
     if not all(t in reader.topics and reader.topics[t].count for t in topics):
         return None
     for t in topics:

@@ -36,8 +36,9 @@ from sepfm_ros.fleet.rigs import (
     compile_pattern,
 )
 from sepfm_ros.ros.bags.errors import BagError
+from sepfm_ros.ros.commands.options import add_param_arguments, add_topic_arguments, given_params_of
 from sepfm_ros.ros.offline.audit import DEFAULT_SLICE_S, Options, run_audit
-from sepfm_ros.ros.session.parameters import monitor_config, parse_params
+from sepfm_ros.ros.session.parameters import monitor_config
 
 
 def _parse(argv: list[str]) -> argparse.Namespace:
@@ -73,23 +74,15 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("--force", action="store_true", help="audit bags done in an earlier run again")
     p.add_argument("--quiet", action="store_true", help="no progress bars")
     p.add_argument("--mode", choices=("stereo", "motion"), help="default: from each bag")
-    p.add_argument("--left", metavar="TOPIC", help="stereo: left image topic (with --right)")
-    p.add_argument("--right", metavar="TOPIC", help="stereo: right image topic (with --left)")
-    p.add_argument("--image", metavar="TOPIC", help="motion: the image topic")
-    p.add_argument(
-        "-p",
-        "--param",
-        action="append",
-        default=[],
-        metavar="NAME:=VALUE",
-        help="a node parameter (e.g. seed:=0, calibration_window:=10); repeatable",
-    )
+    add_topic_arguments(p)
+    add_param_arguments(p, "seed:=0, calibration_window:=10")
     return p.parse_args(argv)
 
 
 def _options(args: argparse.Namespace) -> Options:
     """The run's options; BagError / ValueError / RigPatternError on bad arguments."""
-    params = parse_params(args.param)
+    given = given_params_of(args)
+    params = given.values
     monitor = monitor_config(params)
     if args.slice_s < 0:
         raise ValueError(f"--slice-s must be >= 0, got {args.slice_s}")
@@ -100,7 +93,7 @@ def _options(args: argparse.Namespace) -> Options:
         args.left,
         args.right,
         args.image,
-        any(p.startswith("sync_slop_s:=") for p in args.param),
+        "sync_slop_s" in given.given,
     )
     return Options(
         params,

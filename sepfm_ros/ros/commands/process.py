@@ -44,11 +44,11 @@ from sepfm_ros.ros.bags.results import (
     read_results,
     summarize,
 )
-from sepfm_ros.ros.commands.options import add_topic_arguments
+from sepfm_ros.ros.commands.options import add_param_arguments, add_topic_arguments, given_params_of
 from sepfm_ros.ros.node.signals import DeferredStop, install_stop_handlers, restore_handlers
-from sepfm_ros.ros.offline.process import decoded, run_process
+from sepfm_ros.ros.offline.process import ProcessInputs, decoded, run_process
 from sepfm_ros.ros.session.parameters import (
-    parse_params,
+    ParameterError,
 )
 
 
@@ -62,14 +62,7 @@ def _parse(argv: list[str]) -> argparse.Namespace:
     p.add_argument("-o", "--output", type=Path, required=True, help="output bag (must not exist)")
     p.add_argument("--mode", choices=("stereo", "motion"), help="default: from the bag's topics")
     add_topic_arguments(p)
-    p.add_argument(
-        "-p",
-        "--param",
-        action="append",
-        default=[],
-        metavar="NAME:=VALUE",
-        help="a node parameter (e.g. seed:=0, method:=sep5, features:=orb); repeatable",
-    )
+    add_param_arguments(p, "seed:=0, method:=sep5, features:=orb")
     p.add_argument("--table", action="store_true", help="print the per-frame table")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument(
@@ -91,21 +84,20 @@ def main(argv: list[str]) -> int:
     previous = install_stop_handlers(stop)
     interrupted = False
     try:
-        params = parse_params(args.param)
+        given = given_params_of(args)
+        choice = ProcessInputs(
+            args.mode, args.left, args.right, args.image, "sync_slop_s" in given.given
+        )
         done, total = run_process(
             args.bag,
             args.output,
-            params,
-            args.mode,
+            given.values,
+            choice,
             not args.quiet,
             on_done=print_done if args.print_done else None,
-            left=args.left,
-            right=args.right,
-            image=args.image,
-            slop_given=any(p.startswith("sync_slop_s:=") for p in args.param),
-            stop=stop,
+            stop=stop.check,
         )
-    except BagError as err:
+    except (BagError, ParameterError) as err:
         print(f"sepfm_ros process: error: {err}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:

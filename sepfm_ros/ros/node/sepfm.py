@@ -26,7 +26,7 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticStatus
@@ -36,11 +36,8 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
-    Pipeline,
-    PipelineConfig,
     name_native_thread,
 )
 from sepfm_ros.ros.msgs.diagnostics import health_status
@@ -53,30 +50,24 @@ from sepfm_ros.ros.node.memory import release_free_memory
 from sepfm_ros.ros.node.outputs import NodeOutputs
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.session.answer import (
-    AnswerSettings,
     BadInput,
     PairAnswer,
-    PairCalibration,
     PairHeaders,
     add_timings,
-    answer_matched,
     decode_pair,
-    failure_answer,
-    internal_error_answer,
     internal_error_kind,
     internal_error_text,
     precheck,
 )
-from sepfm_ros.ros.session.calibrated import CalibratedStream, CamerasUpdate
+from sepfm_ros.ros.session.calibrated import CamerasUpdate
 from sepfm_ros.ros.session.parameters import (
     NODE_NAME,
     PARAMS,
     change_errors,
     descriptor,
-    monitor_config,
     parameter_error,
-    pipeline_config,
 )
+from sepfm_ros.ros.session.session import Session, configure_pairing
 from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health
 from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
 from sepfm_ros.stream.scheduling import PairScheduler
@@ -136,23 +127,12 @@ class SepfmNode(Node):
         self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
-        self._pending_config: PipelineConfig | None = None
         self._epipolar_lines = int(values["debug_epipolar_lines"])
-        self._publish_unreliable = bool(values["publish_unreliable"])
         self._scheduler: PairScheduler[Job, MatchedJob] = PairScheduler()
-        self._pipeline = Pipeline(pipeline_config(values), cache_size=8, parallel_detect=True)
-        jump_s = float(values["stamp_jump_reset_s"])
-        self._stereo: StereoPairing[tuple[Any, float]] = StereoPairing(
-            int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"]), jump_s
-        )
-        self._motion: MotionPairing[tuple[Any, float]] = MotionPairing(
-            int(values["frame_gap"]), jump_s
-        )
         names = ("left", "right") if self._mode == "stereo" else ("image",)
         self._health = Health(names, float(values["input_timeout_s"]))
         self._log = ThrottledLog(self)
         self._reported_stall: str | None = None
-        self._pending_monitor: MonitorConfig | None = None
 
         self._out = NodeOutputs(self)
 
@@ -178,16 +158,16 @@ class SepfmNode(Node):
             for base, callback in inputs
         ]
         bases = [base for base, _ in inputs]
-        rectified = values["images"] == "rectified" or (
-            values["images"] == "auto" and any("rect" in self.resolve_topic_name(b) for b in bases)
-        )
-        self._calibrated = CalibratedStream(
+        self._session = Session(
+            values,
             self._mode == "stereo",
-            rectified,
-            monitor_config(values),
+            [self.resolve_topic_name(b) for b in bases],
             self.get_name(),
             self.get_fully_qualified_name(),
+            cache_size=8,
+            parallel_detect=True,
         )
+        self._pairing = self._session.pairing()
         self._camera_info = None
         if values["use_camera_info"]:
             self._camera_info = CameraInfoInputs(
@@ -212,7 +192,7 @@ class SepfmNode(Node):
         self.get_logger().info(
             f"{self._mode} mode, {self._transport} transport, input reliability "
             f"{values['input_reliability']}, listening on "
-            f"{', '.join(s.topic for s in self._subs)}; {self._pipeline.config}"
+            f"{', '.join(s.topic for s in self._subs)}; {self._session.pipeline.config}"
         )
 
     # ---------------------------------------------------------------- parameters
@@ -230,18 +210,11 @@ class SepfmNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         values = self._param_values()
-        config = pipeline_config(values)
-        jump_s = float(values["stamp_jump_reset_s"])
+        self._session.configure(values)
         with self._lock:
-            self._pending_config = config
             self._epipolar_lines = int(values["debug_epipolar_lines"])
-            self._publish_unreliable = bool(values["publish_unreliable"])
-            self._pending_monitor = monitor_config(values)
             self._health.input_timeout_s = float(values["input_timeout_s"])
-            self._stereo.configure(
-                int(round(values["sync_slop_s"] * 1e9)), int(values["sync_queue_size"]), jump_s
-            )
-            self._motion.configure(int(values["frame_gap"]), jump_s)
+            configure_pairing(self._pairing, values)
         self.get_logger().info(
             "parameters set: " + ", ".join(f"{p.name}={p.value!r}" for p in params)
         )
@@ -313,9 +286,10 @@ class SepfmNode(Node):
             return
         stamp = stamp_ns(msg.header.stamp)
         with self._lock:
-            out: PairOutcome = self._stereo.add(side, Frame((msg, received), stamp))
-            run = self._stereo.resets  # after a restart the same stamps may be other images
-            offset = self._stereo.offset_ns()
+            stereo = cast(StereoPairing[tuple[Any, float]], self._pairing)
+            out: PairOutcome = stereo.add(side, Frame((msg, received), stamp))
+            run = stereo.resets  # after a restart the same stamps may be other images
+            offset = stereo.offset_ns()
         if offset is not None:
             self._health.stereo_offset(offset)
         if out.reset:
@@ -335,8 +309,9 @@ class SepfmNode(Node):
             return
         stamp = stamp_ns(msg.header.stamp)
         with self._lock:
-            out: PairOutcome = self._motion.add(Frame((msg, received), stamp))
-            run = self._motion.resets
+            motion = cast(MotionPairing[tuple[Any, float]], self._pairing)
+            out: PairOutcome = motion.add(Frame((msg, received), stamp))
+            run = motion.resets
         if out.reset:
             self._stamp_jumped("image", stamp)
         if out.late:
@@ -365,10 +340,6 @@ class SepfmNode(Node):
             if offered is None:
                 return
             job = offered.job
-            with self._lock:
-                config, self._pending_config = self._pending_config, None
-            if config is not None:
-                self._pipeline.configure(config)
             t0 = time.monotonic()
             try:
                 matched = self._match(job)
@@ -376,7 +347,7 @@ class SepfmNode(Node):
                 matched = self._failed(job, self._internal_error_answer(job, err))
             if isinstance(matched, BadInput):
                 self._bad_input(matched.kind, matched.text)
-                answer = failure_answer(job.headers(), matched, self._settings())
+                answer = self._session.failure(job.headers(), matched)
                 matched = self._failed(job, answer)
             self._scheduler.put_matched(matched, time.monotonic() - t0)
 
@@ -400,7 +371,7 @@ class SepfmNode(Node):
     def _internal_error_answer(self, job: Job, err: Exception) -> PairAnswer:
         """Count and log an unexpected error of a pair; its answer (STATUS_INTERNAL_ERROR)."""
         self._bad_input(internal_error_kind(err), internal_error_text(err))
-        return internal_error_answer(job.headers(), err, self._settings())
+        return self._session.internal_error(job.headers(), err)
 
     @staticmethod
     def _failed(job: Job, answer: PairAnswer) -> MatchedJob:
@@ -415,32 +386,18 @@ class SepfmNode(Node):
         except Exception as err:  # noqa: BLE001 - keep serving
             self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
-    def _settings(self, config: PipelineConfig | None = None) -> AnswerSettings:
-        with self._lock:
-            publish_unreliable = self._publish_unreliable
-        return AnswerSettings.of(config or self._pipeline.config, publish_unreliable)
-
     def _match(self, job: Job) -> MatchedJob | BadInput:
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
         decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
         if isinstance(decoded, BadInput):
             return decoded
-        matched = self._pipeline.match(
-            *decoded.images, job.key_a, job.key_b, prior_timings_ms={"decode": decoded.decode_ms}
-        )
+        matched = self._session.match(decoded, job.key_a, job.key_b)
         return MatchedJob(job, matched, decoded.images, wait_ms, time.monotonic())
 
-    def _calibration(self) -> PairCalibration | None:
-        """The stream's calibration and the latest camera_info (None without camera_info
-        input: the pair is estimated in image pixels). Estimate thread."""
-        with self._lock:
-            pending, self._pending_monitor = self._pending_monitor, None
-        if pending is not None:
-            self._calibrated.configure_monitor(pending)
-        if self._camera_info is None:
-            return None
-        return PairCalibration(self._calibrated, self._camera_info.latest())
+    def _camera_infos(self) -> list[Any] | None:
+        """The latest camera_info of each camera (None: none yet, or camera_info not used)."""
+        return None if self._camera_info is None else self._camera_info.latest()
 
     def _log_cameras(self, update: CamerasUpdate | None) -> None:
         """Count and log unusable camera_info; log a calibration newly in use."""
@@ -450,7 +407,7 @@ class SepfmNode(Node):
             self._health.problem("camera_info_invalid")
             self._log.log("camera_info_invalid", f"camera_info unusable: {update.reason}")
         elif update.changed:
-            calibration = self._calibrated.calibration
+            calibration = self._session.calibrated.calibration
             self.get_logger().info(
                 "camera_info in use: F in undistorted pixels of K"
                 + (", rectified images" if calibration.rectified else "")
@@ -466,12 +423,10 @@ class SepfmNode(Node):
         job = item.job
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
         assert item.matched is not None  # failures are published as they are
-        answer = answer_matched(
-            self._pipeline,
+        answer = self._session.answer_matched(
             job.headers(),
             item.matched,
-            self._settings(item.matched.config),
-            self._calibration(),
+            self._camera_infos(),
             {"wait": item.wait_ms, "queue": queue_ms},
         )
         self._log_cameras(answer.cameras_update)
@@ -505,11 +460,11 @@ class SepfmNode(Node):
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())
         # motion mode: each frame detected once (its features are cached by stamp)
-        values["images_detected"] = self._pipeline.images_detected
-        values["images_features_cached"] = self._pipeline.images_cached
+        values["images_detected"] = self._session.pipeline.images_detected
+        values["images_features_cached"] = self._session.pipeline.images_cached
         if self._mode == "stereo":
             with self._lock:
-                stats = self._stereo.stats
+                stats = cast(StereoPairing[tuple[Any, float]], self._pairing).stats
                 values["sync_unmatched"] = stats.unmatched + stats.evicted
                 values["sync_late"] = stats.late
         return values

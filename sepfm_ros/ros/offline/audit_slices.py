@@ -3,8 +3,8 @@ through the node's answer path (:func:`audit_slice`). Both run on the engine's w
 return plain data (:mod:`sepfm_ros.fleet.records`), or a :class:`TaskFailure` saying why the bag
 cannot be audited: a bad bag is a row with its reason, never a crashed run.
 
-Each pair is answered by the node's one answer path
-(:func:`~sepfm_ros.ros.session.answer.answer_pair`, with the calibration check's sliding window
+Each pair is answered by the bag's session, as the node answers it
+(:class:`~sepfm_ros.ros.offline.stream.BagStream`, with the calibration check's sliding window
 when the bag has calibrated stereo), and :func:`pair_record` reads the audit's figures from that
 typed answer: the audit's judgement is the node's, not a copy of it.
 """
@@ -29,30 +29,21 @@ from sepfm_ros.fleet.records import (
     TaskFailure,
 )
 from sepfm_ros.fleet.slices import warm_pairs
-from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
 from sepfm_ros.ros.bags.pairing import (
     PairJob,
     expected_pairs,
-    iter_pairs,
     pairing_slop_ns,
-    read_camera_infos,
 )
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
-from sepfm_ros.ros.bags.results import OUTPUT_NAMESPACE
 from sepfm_ros.ros.bags.types import CAMERA_INFO, header_stamp_ns
 from sepfm_ros.ros.msgs.diagnostics import status_values
 from sepfm_ros.ros.msgs.headers import stamp_ns
+from sepfm_ros.ros.offline.stream import BagStream
 from sepfm_ros.ros.session.answer import (
-    AnswerSettings,
     PairAnswer,
-    PairCalibration,
-    answer_pair,
-    decode_pair,
 )
-from sepfm_ros.ros.session.calibrated import CalibratedStream
-from sepfm_ros.ros.session.parameters import monitor_config, pipeline_config
 
 # header stamps of the first camera read to find its frame period and the stereo slop
 PERIOD_SAMPLE = 201
@@ -187,36 +178,6 @@ def pair_record(job: PairJob, answer: PairAnswer) -> PairRecord:
     )
 
 
-class _Answerer:
-    """The node's answer path over one bag's pairs (pipeline, calibration and its window)."""
-
-    def __init__(self, reader: BagReader, spec: InputSpec, params: dict[str, Any]) -> None:
-        self.pipeline = Pipeline(pipeline_config(params), cache_size=8)
-        self.settings = AnswerSettings.of(self.pipeline.config, params["publish_unreliable"])
-        self.infos = read_camera_infos(reader, spec) if params["use_camera_info"] else None
-        self.calibrated = None
-        if self.infos is not None:
-            rectified = params["images"] == "rectified" or (
-                params["images"] == "auto" and spec.rectified()
-            )
-            self.calibrated = CalibratedStream(
-                spec.mode == "stereo", rectified, monitor_config(params), OUTPUT_NAMESPACE[1:]
-            )
-
-    def answer(self, job: PairJob) -> PairRecord:
-        """The pair's answer (:func:`~sepfm_ros.ros.session.answer.answer_pair`, as the node's)."""
-        calibration = None
-        if self.calibrated is not None and self.infos is not None:
-            infos = self.infos.at(stamp_ns(job.header.stamp))
-            calibration = PairCalibration(self.calibrated, infos)
-        decoded = decode_pair(job.msg_a, job.msg_b, job.stereo)
-        answer = answer_pair(
-            self.pipeline, job.headers(), decoded, self.settings, (job.key_a, job.key_b),
-            calibration,
-        )  # fmt: skip
-        return pair_record(job, answer)
-
-
 def audit_slice(task: SliceTask) -> Any:
     """The pairs of one slice (:class:`SliceResult`), or a :class:`TaskFailure`.
 
@@ -227,21 +188,21 @@ def audit_slice(task: SliceTask) -> Any:
     try:
         with BagReader(info.bag) as reader:
             spec = _slice_spec(reader, info)
-            answerer = _Answerer(reader, spec, params)
+            stream = BagStream.open(reader, spec, params, info.slop_ns)
+            stream.reader = _From(reader, task.read_from_ns)
             before: deque[PairJob] = deque(maxlen=warm_pairs(params))
             pairs: list[PairRecord] = []
             warm = 0
-            source = _From(reader, task.read_from_ns)
-            for job in iter_pairs(source, spec, params, info.slop_ns):  # type: ignore[arg-type]
+            for job in stream.pairs():
                 if job.log_time_ns < task.t0_ns:
                     before.append(job)  # only the last window's pairs are answered
                     continue
                 if job.log_time_ns >= task.t1_ns:
                     break
                 while before:
-                    answerer.answer(before.popleft())
+                    stream.answer(before.popleft())
                     warm += 1
-                pairs.append(answerer.answer(job))
+                pairs.append(pair_record(job, stream.answer(job)))
             return SliceResult(task.index, pairs, warm)
     except Exception as err:  # noqa: BLE001 - every failure becomes the bag's row
         return _failure(info.bag, err)

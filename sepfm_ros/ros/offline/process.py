@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import sys
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -17,16 +18,12 @@ from rosbags.interfaces import QosTime as _QosTime
 from tqdm import tqdm
 
 from sepfm_msgs.msg import TwoViewEstimate
-from sepfm_ros.pipeline.pipeline import Pipeline
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import (
     detect_inputs,
 )
 from sepfm_ros.ros.bags.pairing import (
     PairJob,
-    iter_pairs,
-    pairing_slop_ns,
-    read_camera_infos,
     validate_inputs,
 )
 from sepfm_ros.ros.bags.reader import BagReader
@@ -47,28 +44,17 @@ from sepfm_ros.ros.bags.types import (
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
 from sepfm_ros.ros.msgs.headers import stamp_ns
-from sepfm_ros.ros.node.signals import DeferredStop
+from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 from sepfm_ros.ros.session.answer import (
     ESTIMATOR_INPUT,
-    AnswerSettings,
-    PairCalibration,
-    answer_pair,
-    decode_pair,
     internal_error_text,
 )
-from sepfm_ros.ros.session.calibrated import CalibratedStream
-from sepfm_ros.ros.session.parameters import (
-    monitor_config,
-    pipeline_config,
-)
+from sepfm_ros.ros.session.parameters import ParameterError
+
+Stop = Callable[[], None]  # raises KeyboardInterrupt when a stop was requested
 
 # The node's publishers: reliable, volatile, keep last 10 (recorded as the offered QoS).
-_ZERO = _QosTime(0, 0)
-
-
 _INF = _QosTime(2147483647, 4294967295)
-
-
 OUTPUT_QOS = Qos(
     QosHistory.KEEP_LAST,
     10,
@@ -91,94 +77,104 @@ def decoded(result: FrameResult) -> bool:
     )
 
 
+@dataclass
+class ProcessInputs:
+    """Which inputs ``process`` reads: the mode and topics (None: picked from the bag) and
+    whether the user set ``sync_slop_s`` (else stereo pairs form within half a frame period)."""
+
+    mode: str | None = None
+    left: str | None = None
+    right: str | None = None
+    image: str | None = None
+    slop_given: bool = False
+
+
+def _say(text: str) -> None:
+    print(f"sepfm_ros process: {text}", file=sys.stderr, flush=True)
+
+
+def open_bag_stream(
+    reader: BagReader, params: dict[str, Any], choice: ProcessInputs, stop: Stop | None
+) -> tuple[BagStream, int]:
+    """The bag's stream as ``process`` reads it, and how many pairs it gives (BagError when
+    none; the input pick and irregular stamps are reported on stderr)."""
+    spec = detect_inputs(reader, choice.mode, choice.left, choice.right, choice.image)
+    inputs = validate_inputs(reader, spec)
+    if stop is not None:
+        stop()
+    slop_ns = stereo_slop_ns(spec, params, inputs.stamps[spec.topics[0]], choice.slop_given)
+    for line in inputs.warnings(params["stamp_jump_reset_s"]):
+        _say(line)
+    if spec.picked:
+        _say(
+            f"input {spec.describe()} (picked from the bag's image topics; choose with "
+            "--left/--right or --image)"
+        )
+    try:
+        stream = BagStream.open(reader, spec, params, slop_ns)
+    except ParameterError as err:
+        raise BagError(str(err)) from None
+    total = stream.pair_count(inputs)
+    if total == 0:
+        gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
+        raise BagError(inputs.no_pairs_reason(spec, gap, slop_ns, flag))
+    if stream.infos is not None:
+        _say(
+            f"camera_info from {' + '.join(stream.infos.topics)}: F in undistorted pixels of K,"
+            " relative pose" + (" and calibration check" if spec.mode == "stereo" else "")
+        )
+    return stream, total
+
+
+def _output_topics(
+    writer: BagWriter, reader: BagReader, stream: BagStream, namespace: str
+) -> dict[str, str]:
+    """Declare the output topics (and copy the ground truth when the bag has it)."""
+    topics = output_topics(namespace)
+    writer.add_topic(topics["estimate"], TWO_VIEW_ESTIMATE, (OUTPUT_QOS,))
+    writer.add_topic(topics["matches"], MATCH_ARRAY, (OUTPUT_QOS,))
+    if stream.infos is not None:
+        topics = {**topics, **calibrated_topics(namespace)}
+        writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
+        writer.add_topic(topics["calibration_check"], DIAGNOSTIC_STATUS, (OUTPUT_QOS,))
+    if GROUND_TRUTH_TOPIC in reader.topics:
+        reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
+        writer.add_topic(GROUND_TRUTH_TOPIC, IMAGE, reader.topics[GROUND_TRUTH_TOPIC].qos)
+        for raw in reader.messages([GROUND_TRUTH_TOPIC]):
+            writer.write(GROUND_TRUTH_TOPIC, raw.log_time_ns, raw.data)
+        writer.flush()
+    return topics
+
+
 def run_process(
     bag: Path,
     out: Path,
     params: dict[str, Any],
-    mode: str | None = None,
+    choice: ProcessInputs | None = None,
     progress: bool = True,
     namespace: str = OUTPUT_NAMESPACE,
     on_done: Callable[[int, int, int], None] | None = None,
-    left: str | None = None,
-    right: str | None = None,
-    image: str | None = None,
-    slop_given: bool = False,
-    stop: DeferredStop | None = None,
+    stop: Stop | None = None,
 ) -> tuple[int, int]:
     """Process ``bag`` into a new bag ``out``; returns (pairs processed, pairs expected).
 
-    The input topics are ``left``/``right`` or ``image`` when given, else picked from the bag
-    (:func:`~sepfm_ros.ros.bags.inputs.detect_inputs`; the pick is printed on stderr). Stereo
-    pairs form within :func:`pairing_slop_ns` (``slop_given``: ``sync_slop_s`` was set by the
-    user and is used as is).
+    The inputs are ``choice``'s (default: picked from the bag,
+    :func:`~sepfm_ros.ros.bags.inputs.detect_inputs`; the pick is printed on stderr). Stereo
+    pairs form within :func:`~sepfm_ros.ros.bags.pairing.pairing_slop_ns`.
 
     ``on_done(k, total, stamp_ns)`` is called after pair k's results were flushed to ``out``
     (they survive any interruption from then on).
 
     Raises BagError subclasses on bad input; KeyboardInterrupt propagates after ``out`` is closed
-    (readable, holding every result so far). ``stop``: a deferred stop request, checked before
-    each pair (see :class:`~sepfm_ros.ros.node.signals.DeferredStop`).
+    (readable, holding every result so far). ``stop``: called before each pair; it raises
+    KeyboardInterrupt when a stop was requested (``DeferredStop.check``).
     """
     check_output_path(out)
-    topics = output_topics(namespace)
-    try:
-        config = pipeline_config(params)
-    except ValueError as err:
-        raise BagError(str(err)) from None
     with BagReader(bag) as reader:
-        spec = detect_inputs(reader, mode, left, right, image)
-        inputs = validate_inputs(reader, spec)
-        if stop is not None:
-            stop.check()
-        slop_ns = None
-        if spec.mode == "stereo":
-            slop_ns = pairing_slop_ns(params, inputs.stamps[spec.topics[0]], slop_given)
-        for line in inputs.warnings(params["stamp_jump_reset_s"]):
-            print(f"sepfm_ros process: {line}", file=sys.stderr, flush=True)
-        if spec.picked:
-            print(
-                f"sepfm_ros process: input {spec.describe()} (picked from the bag's image "
-                "topics; choose with --left/--right or --image)",
-                file=sys.stderr,
-                flush=True,
-            )
-        total = inputs.pair_count(spec, params, slop_ns)
-        if total == 0:
-            gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"
-            raise BagError(inputs.no_pairs_reason(spec, gap, slop_ns, flag))
-        has_gt = GROUND_TRUTH_TOPIC in reader.topics
-        if has_gt:
-            reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
-        pipeline = Pipeline(config, cache_size=8)
-        infos = read_camera_infos(reader, spec) if params["use_camera_info"] else None
-        calibrated = None
-        if infos is not None:
-            rectified = params["images"] == "rectified" or (
-                params["images"] == "auto" and spec.rectified()
-            )
-            calibrated = CalibratedStream(
-                spec.mode == "stereo", rectified, monitor_config(params), OUTPUT_NAMESPACE[1:]
-            )
-            print(
-                f"sepfm_ros process: camera_info from {' + '.join(infos.topics)}: F in "
-                "undistorted pixels of K, relative pose"
-                + (" and calibration check" if spec.mode == "stereo" else ""),
-                file=sys.stderr,
-                flush=True,
-            )
+        stream, total = open_bag_stream(reader, params, choice or ProcessInputs(), stop)
         done = 0
         with BagWriter(out, flush_interval_s=None) as writer:
-            writer.add_topic(topics["estimate"], TWO_VIEW_ESTIMATE, (OUTPUT_QOS,))
-            writer.add_topic(topics["matches"], MATCH_ARRAY, (OUTPUT_QOS,))
-            if calibrated is not None:
-                topics = {**topics, **calibrated_topics(namespace)}
-                writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
-                writer.add_topic(topics["calibration_check"], DIAGNOSTIC_STATUS, (OUTPUT_QOS,))
-            if has_gt:
-                writer.add_topic(GROUND_TRUTH_TOPIC, IMAGE, reader.topics[GROUND_TRUTH_TOPIC].qos)
-                for raw in reader.messages([GROUND_TRUTH_TOPIC]):
-                    writer.write(GROUND_TRUTH_TOPIC, raw.log_time_ns, raw.data)
-                writer.flush()
+            topics = _output_topics(writer, reader, stream, namespace)
             bar = tqdm(
                 total=total,
                 unit="pair",
@@ -188,14 +184,11 @@ def run_process(
                 dynamic_ncols=True,
             )
             try:
-                for job in iter_pairs(reader, spec, params, slop_ns):
+                for job in stream.pairs():
                     if stop is not None:
-                        stop.check()
-                    calib = None
-                    if calibrated is not None:
-                        calib = PairCalibration(calibrated, infos.at(stamp_ns(job.header.stamp)))
-                    for data in process_pair(pipeline, job, params, topics, calib):
-                        writer.write(data[0], job.log_time_ns, data[1])
+                        stop()
+                    for topic, data in process_pair(stream, job, topics):
+                        writer.write(topic, job.log_time_ns, data)
                     writer.flush()  # every result survives a kill from now on
                     done += 1
                     bar.update(1)
@@ -207,23 +200,13 @@ def run_process(
 
 
 def process_pair(
-    pipeline: Pipeline,
-    job: PairJob,
-    params: dict[str, Any],
-    topics: dict[str, str],
-    calibration: PairCalibration | None = None,
+    stream: BagStream, job: PairJob, topics: dict[str, str]
 ) -> list[tuple[str, bytes]]:
     """The node's messages for one pair as (topic, CDR bytes), in the order the node publishes
-    them (:func:`~sepfm_ros.ros.session.answer.answer_pair`: the same answer as the node's, a
-    failure record for a pair that cannot be decoded or whose frame size changed).
-
-    ``calibration``: the stream's calibration and the pair's latest camera_info messages: F in
-    undistorted pixels, the pose, plus the relative transform and calibration check topics.
-    """
-    settings = AnswerSettings.of(pipeline.config, params["publish_unreliable"])
-    decoded = decode_pair(job.msg_a, job.msg_b, job.stereo)
-    keys = (job.key_a, job.key_b)
-    answer = answer_pair(pipeline, job.headers(), decoded, settings, keys, calibration)
+    them (:meth:`BagStream.answer`: the same answer as the node's, a failure record for a pair
+    that cannot be decoded or whose frame size changed); with camera_info, the relative
+    transform and calibration check too."""
+    answer = stream.answer(job)
     if answer.result is None:
         stamp = format_stamp(stamp_ns(job.header.stamp))
         print(f"\npair at {stamp}: {answer.estimate.status_text}", file=sys.stderr)

@@ -4,13 +4,12 @@ library)."""
 
 from __future__ import annotations
 
-import argparse
 import csv
 import sys
-from collections.abc import Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, TextIO
 
 import numpy as np
 
@@ -20,29 +19,16 @@ from sepfm_ros.geometry.calibrated.calibration_check import (
     PairCheck,
 )
 from sepfm_ros.geometry.calibrated.camera import CalibrationError
-from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.pairing import (
-    paired_frames,
-    pairing_slop_ns,
+    PairJob,
     validate_inputs,
 )
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.types import CAMERA_INFO, format_stamp
 from sepfm_ros.ros.msgs.headers import camera_info_topic, stamp_ns
-from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
-from sepfm_ros.ros.node.signals import DeferredStop
-from sepfm_ros.ros.session.answer import (
-    AnswerSettings,
-    PairCalibration,
-    PairHeaders,
-    answer_pair,
-    decode_pair,
-    precheck,
-)
-from sepfm_ros.ros.session.calibrated import CalibratedStream
-from sepfm_ros.ros.session.parameters import parameter_error, parse_params
+from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 
 
 @dataclass
@@ -55,139 +41,100 @@ class PairRow:
     status: CalibrationStatus
 
 
-def _monitor_config(args: argparse.Namespace) -> MonitorConfig:
-    return MonitorConfig(
-        window=args.window,
-        min_pairs=args.min_pairs,
-        min_inliers=args.min_inliers,
-        warn_epipolar_px=args.warn_epipolar_px,
-        error_epipolar_px=args.error_epipolar_px,
-        warn_rotation_deg=args.warn_rotation_deg,
-        error_rotation_deg=args.error_rotation_deg,
+@dataclass(frozen=True)
+class CheckRequest:
+    """What to check: the bag, its stereo topics (None: picked from the bag), the camera_info
+    topics (None: beside each image topic), the node's parameter values (``slop_given``: the user
+    set ``sync_slop_s``, else pairs form within half a frame period) and at most how many pairs
+    (0: all)."""
+
+    bag: str
+    values: dict[str, Any]
+    left: str | None = None
+    right: str | None = None
+    left_info: str | None = None
+    right_info: str | None = None
+    slop_given: bool = False
+    max_pairs: int = 0
+
+
+def _missing_info(reader: BagReader, bag: str, topics: tuple[str, str]) -> CalibrationError | None:
+    """Why the bag cannot be checked with camera_info ``topics`` (None when both have messages)."""
+    for topic in topics:
+        if topic not in reader.topics or not reader.topics[topic].count:
+            have = ", ".join(
+                t for t, i in sorted(reader.topics.items()) if i.msgtype == CAMERA_INFO
+            )
+            return CalibrationError(
+                f"bag {bag} has no camera_info on {topic}: a calibration check needs both cameras'"
+                f" camera_info (camera_info topics in the bag: {have or 'none'}; choose them with"
+                " --left-info/--right-info)"
+            )
+        reader.require(topic, (CAMERA_INFO,))
+    return None
+
+
+def _open(reader: BagReader, req: CheckRequest, out: TextIO) -> tuple[BagStream, int]:
+    """The bag's stereo stream with its camera_info, and how many pairs to check."""
+    spec = detect_inputs(reader, "stereo", req.left, req.right)
+    left, right = spec.topics
+    infos = (
+        reader.resolve(req.left_info or camera_info_topic(left)),
+        reader.resolve(req.right_info or camera_info_topic(right)),
     )
-
-
-class _Rig:
-    """The rig's calibration (the node's :class:`CalibratedStream`, whose monitor decides) and
-    the latest camera_info of each side."""
-
-    def __init__(self, rectified: bool, monitor: MonitorConfig) -> None:
-        self.stream = CalibratedStream(True, rectified, monitor, "calibration_check")
-        self.infos: dict[str, Any] = {}
-
-    def calibration(self) -> PairCalibration:
-        """The calibration input of the next pair (both sides' camera_info known)."""
-        return PairCalibration(self.stream, [self.infos["left"], self.infos["right"]])
+    if (missing := _missing_info(reader, req.bag, infos)) is not None:
+        raise missing
+    inputs = validate_inputs(reader, spec)
+    slop_ns = stereo_slop_ns(spec, req.values, inputs.stamps[left], req.slop_given)
+    stream = BagStream.open(reader, spec, {**req.values, "use_camera_info": True}, slop_ns, infos)
+    total = stream.pair_count(inputs)  # the node's pairing, run on the stamps
+    if total == 0:
+        raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "-p sync_slop_s:=SECONDS"))
+    if req.max_pairs:
+        total = min(total, req.max_pairs)
+    print(
+        f"checking {total} stereo pairs of {req.bag} ({left} + {right}"
+        + (", picked from the bag's image topics" if spec.picked else "")
+        + f"; {'rectified' if stream.session.rectified else 'raw'} images, pairs within "
+        f"{(slop_ns or 0) / 1e6:.1f} ms, calibration from {infos[0]} and {infos[1]})",
+        file=out,
+    )
+    for line in inputs.warnings(req.values["stamp_jump_reset_s"]):
+        print(line, file=out)
+    return stream, total
 
 
 def run_check(
-    args: argparse.Namespace, out=sys.stdout, stop: DeferredStop | None = None
+    req: CheckRequest, out: TextIO = sys.stdout, stop: Callable[[], None] | None = None
 ) -> list[PairRow]:
-    """Check every stereo pair of the bag; print progress and figures. Raises BagError,
-    CalibrationError or ValueError on bad input; KeyboardInterrupt when ``stop`` was
-    requested (checked before each message)."""
-    params = parse_params([])  # the node's pairing parameters, at their defaults
-    if args.sync_slop is not None:
-        error = parameter_error("sync_slop_s", args.sync_slop)
-        if error:
-            raise ValueError(f"--sync-slop: {error}")
-        params["sync_slop_s"] = args.sync_slop
-    pipeline = Pipeline(PipelineConfig())
+    """Check every stereo pair of the bag through the session (the node's answer and its
+    calibration monitor); print progress and figures. Raises BagError, CalibrationError or
+    ParameterError on bad input; ``stop`` is called before each pair (it raises
+    KeyboardInterrupt when a stop was requested)."""
     rows: list[PairRow] = []
-    with BagReader(args.bag) as reader:
-        spec = detect_inputs(reader, "stereo", args.left, args.right)
-        left, right = spec.topics
-        left_info = reader.resolve(args.left_info or camera_info_topic(left))
-        right_info = reader.resolve(args.right_info or camera_info_topic(right))
-        rectified = args.rectified == "yes" or args.rectified == "auto" and spec.rectified()
-        for topic in (left_info, right_info):
-            if topic not in reader.topics:
-                have = ", ".join(
-                    t for t, i in sorted(reader.topics.items()) if i.msgtype == CAMERA_INFO
-                )
-                raise CalibrationError(
-                    f"bag {args.bag} has no camera_info on {topic}: a calibration check needs "
-                    f"both cameras' camera_info (camera_info topics in the bag: "
-                    f"{have or 'none'}; choose them with --left-info/--right-info)"
-                )
-            reader.require(topic, (CAMERA_INFO,))
-        jump_s = params["stamp_jump_reset_s"]
-        inputs = validate_inputs(reader, spec)
-        slop_ns = pairing_slop_ns(params, inputs.stamps[left], args.sync_slop is not None)
-        total = inputs.pair_count(spec, params, slop_ns)  # the node's pairing, run on the stamps
-        if total == 0:
-            raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "--sync-slop"))
-        if args.max_pairs:
-            total = min(total, args.max_pairs)
-        rig = _Rig(rectified, _monitor_config(args))
-        print(
-            f"checking {total} stereo pairs of {args.bag} ({left} + {right}"
-            + (", picked from the bag's image topics" if spec.picked else "")
-            + f"; {'rectified' if rectified else 'raw'} images, pairs within "
-            f"{slop_ns / 1e6:.1f} ms, calibration from {left_info} and {right_info})",
-            file=out,
-        )
-        for line in inputs.warnings(jump_s):
-            print(line, file=out)
-        sides = {left_info: "left", right_info: "right"}
-        zero_step = ZeroStepNotes()
-
-        def events() -> Iterator[tuple[str, int, Any, int]]:
-            """The image messages in bag order; camera_info messages update the rig."""
-            for raw in reader.messages([left, right, left_info, right_info]):
-                if stop is not None:
-                    stop.check()
-                msg = reader.deserialize(raw)
-                if raw.topic in sides:
-                    rig.infos[sides[raw.topic]] = msg
-                elif precheck(msg) is None:  # as the node: unusable fields are never paired
-                    if (note := zero_step.note(raw.topic, msg)) is not None:
-                        print(f"warning: {note}", file=out)
-                    yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
-
-        def check_ready() -> None:
-            """Check the complete pairs once both camera_infos are known."""
-            while ready and len(rig.infos) == 2 and len(rows) < total:
-                stamp, msg_l, msg_r = ready.pop(0)
-                row = _check_one(rig, pipeline, stamp, msg_l, msg_r, len(rows), out)
-                if row is not None:
-                    rows.append(row)
-                    print(_row_line(row, total), file=out, flush=True)
-
-        ready: list[tuple[int, Any, Any]] = []  # complete pairs waiting for both camera_infos
-        for pair in paired_frames(spec, params, slop_ns, events()):
-            ready.append((pair.a.stamp_ns, pair.a.item, pair.b.item))
-            check_ready()
+    with BagReader(req.bag) as reader:
+        stream, total = _open(reader, req, out)
+        for job in stream.pairs():
+            if stop is not None:
+                stop()
+            row = _check_one(stream, job, len(rows), out)
+            if row is not None:
+                rows.append(row)
+                print(_row_line(row, total), file=out, flush=True)
             if len(rows) >= total:
                 break
-        check_ready()  # a camera_info after the last pair
-        if ready and len(rows) < total:
-            missing = [s for s in ("left", "right") if s not in rig.infos]
-            topics = [left_info if s == "left" else right_info for s in missing]
-            raise CalibrationError(f"no camera_info message on {', '.join(topics)} in the bag")
     return rows
 
 
-def _check_one(
-    rig: _Rig,
-    pipeline: Pipeline,
-    stamp: int,
-    msg_l: Any,
-    msg_r: Any,
-    index: int,
-    out,
-) -> PairRow | None:
-    """Check one stereo pair through the node's answer path
-    (:func:`~sepfm_ros.ros.session.answer.answer_pair`); None (with a printed reason) when the
-    pair's answer is a failure record (its images cannot be decoded).
+def _check_one(stream: BagStream, job: PairJob, index: int, out: TextIO) -> PairRow | None:
+    """Check one stereo pair through the node's answer (:meth:`BagStream.answer`); None (with a
+    printed reason) when the pair's answer is a failure record (its images cannot be decoded).
 
     Raises:
         CalibrationError: the camera_info cannot calibrate these images or gives no rig.
     """
-    headers = PairHeaders(msg_l.header, msg_l.header, msg_r.header)
-    decoded = decode_pair(msg_l, msg_r, stereo=True)
-    settings = AnswerSettings.of(pipeline.config, publish_unreliable=True)
-    answer = answer_pair(pipeline, headers, decoded, settings, calibration=rig.calibration())
+    stamp = stamp_ns(job.header.stamp)
+    answer = stream.answer(job)
     if answer.result is None:
         print(f"pair at {format_stamp(stamp)}: skipped, {answer.estimate.status_text}", file=out)
         return None
@@ -196,7 +143,8 @@ def _check_one(
         raise CalibrationError(update.reason)
     calibrated = answer.calibrated
     if calibrated is None or calibrated.check is None or calibrated.status is None:
-        raise CalibrationError(rig.stream.calibration.rig_problem or "no calibrated stereo rig")
+        problem = stream.session.calibrated.calibration.rig_problem
+        raise CalibrationError(problem or "no calibrated stereo rig")
     return PairRow(index, stamp, calibrated.check, calibrated.status)
 
 

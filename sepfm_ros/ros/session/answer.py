@@ -20,7 +20,8 @@ its callback, ``process`` as it reads the bag). The steps of a pair, for callers
 them over threads (the node matches one pair while it estimates the previous one):
 :func:`decode_pair` (images or a :class:`BadInput`), the
 pipeline's ``match``, then :func:`answer_matched`; :func:`failure_answer` answers a pair that
-never reached the estimator. :func:`answer_pair` does all of it in one call.
+never reached the estimator. :class:`~sepfm_ros.ros.session.session.Session` composes them
+for a stream.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     pass
 import math
-from collections.abc import Hashable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -188,30 +189,6 @@ def decode_pair(msg_a: Any, msg_b: Any, stereo: bool) -> DecodedPair | BadInput:
 
 def _size(image: np.ndarray) -> tuple[int, int]:
     return int(image.shape[1]), int(image.shape[0])
-
-
-def answer_pair(
-    pipeline: Pipeline,
-    headers: PairHeaders,
-    decoded: DecodedPair | BadInput,
-    settings: AnswerSettings,
-    keys: tuple[Hashable, Hashable] | tuple[None, None] = (None, None),
-    calibration: PairCalibration | None = None,
-) -> PairAnswer:
-    """The whole path for one pair: match, estimate, compose. Never raises on a pair: an
-    unexpected error gives the ``STATUS_INTERNAL_ERROR`` record (:func:`internal_error_answer`).
-
-    ``keys``: the feature cache's keys of image a and b (each frame is detected once).
-    """
-    if isinstance(decoded, BadInput):
-        return failure_answer(headers, decoded, settings)
-    try:
-        matched = pipeline.match(
-            *decoded.images, *keys, prior_timings_ms={"decode": decoded.decode_ms}
-        )
-        return answer_matched(pipeline, headers, matched, settings, calibration)
-    except Exception as err:  # noqa: BLE001 - every pair gets an answer
-        return internal_error_answer(headers, err, settings)
 
 
 def answer_matched(

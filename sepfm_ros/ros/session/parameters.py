@@ -7,8 +7,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 from rcl_interfaces.msg import (
@@ -17,12 +18,13 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     ParameterType,
 )
+from ruamel.yaml import YAML
+from ruamel.yaml.error import YAMLError
 
 from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
 from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
-from sepfm_ros.ros.bags.errors import BagError
 
 NODE_NAME = "sepfm"
 MODES = ("stereo", "motion")
@@ -286,31 +288,127 @@ def change_errors(values: dict[str, Any], changes: dict[str, Any]) -> list[str]:
     return reasons
 
 
-def parse_params(items: list[str]) -> dict[str, Any]:
-    """``name:=value`` strings -> node parameter values (defaults for the rest), validated."""
+class ParameterError(ValueError):
+    """A parameter value, name or file that cannot be used (the message says why)."""
+
+
+@dataclass(frozen=True)
+class GivenParams:
+    """Every parameter's value (defaults for the rest) and the names the user set."""
+
+    values: dict[str, Any]
+    given: frozenset[str]
+
+
+def parse_value(name: str, text: str) -> Any:
+    """The value of parameter ``name`` written as ``text`` (``-p name:=text``), validated."""
+    if name not in PARAMS:
+        raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
+    default = PARAMS[name].default
+    try:
+        if isinstance(default, bool):
+            if text.lower() not in ("true", "false"):
+                raise ValueError
+            value: Any = text.lower() == "true"
+        elif isinstance(default, int):
+            value = int(text)
+        elif isinstance(default, float):
+            value = float(text)
+        else:
+            value = text
+    except ValueError:
+        raise ParameterError(f"parameter {name}: cannot read {text!r}") from None
+    return checked(name, value)
+
+
+def checked(name: str, value: Any) -> Any:
+    """``value`` for parameter ``name`` as the node takes it (an integer where a float is
+    expected becomes a float); ParameterError when it is not acceptable."""
+    if name not in PARAMS:
+        raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
+    default = PARAMS[name].default
+    if isinstance(default, float) and isinstance(value, int) and not isinstance(value, bool):
+        value = float(value)
+    error = parameter_error(name, value)
+    if error:
+        raise ParameterError(error)
+    if type(value) is not type(default):
+        raise ParameterError(f"{name} must be of type {type(default).__name__}; got {value!r}")
+    return value
+
+
+# sections of a params file that apply to the sepfm node (rcl's wildcards and its name)
+_SECTIONS = ("/**", NODE_NAME, "/" + NODE_NAME, "/**/" + NODE_NAME)
+# parameters rclpy declares itself, or that configure rclpy (not the node's table)
+_RCL_PARAMS = ("use_sim_time", "start_type_description_service")
+
+
+def _flatten(section: Mapping[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in section.items():
+        name = f"{prefix}{key}"
+        if isinstance(value, Mapping):
+            out.update(_flatten(value, name + "."))
+        else:
+            out[name] = value
+    return out
+
+
+def read_params_file(path: str | Path) -> dict[str, Any]:
+    """The sepfm node's values in a ROS 2 params file (``--params-file``; the YAML of
+    ``config/sepfm.yaml``): the ``ros__parameters`` of its ``/**`` and ``sepfm`` sections,
+    nested names joined with dots; rclpy's own (``use_sim_time``, ``qos_overrides.*``) are
+    left out. ParameterError when the file cannot be read or holds an unknown name or value."""
+    try:
+        data = YAML(typ="safe").load(Path(path).read_text())
+    except (OSError, YAMLError) as err:
+        raise ParameterError(f"params file {path}: {err}") from None
+    if not isinstance(data, Mapping):
+        raise ParameterError(f"params file {path}: not a mapping of node names")
+    values: dict[str, Any] = {}
+    for key, section in data.items():
+        if str(key) not in _SECTIONS:
+            continue
+        if not isinstance(section, Mapping) or "ros__parameters" not in section:
+            raise ParameterError(f"params file {path}: section {key!r} has no ros__parameters")
+        for name, value in _flatten(section["ros__parameters"] or {}).items():
+            if name in _RCL_PARAMS or name.startswith("qos_overrides."):
+                continue
+            try:
+                values[name] = checked(name, value)
+            except ParameterError as err:
+                raise ParameterError(f"params file {path}: {err}") from None
+    if not values:
+        raise ParameterError(
+            f"params file {path}: no ros__parameters for the sepfm node (sections: "
+            f"{', '.join(map(str, data)) or 'none'}; expected one of {', '.join(_SECTIONS)})"
+        )
+    return values
+
+
+def given_params(items: Sequence[str] = (), params_file: str | Path | None = None) -> GivenParams:
+    """Parameter values from a params file and ``name:=value`` items (as in ``--ros-args
+    --params-file FILE -p name:=value``: an item overrides the file), defaults for the rest."""
     values = {name: spec.default for name, spec in PARAMS.items()}
+    given: set[str] = set()
+    if params_file is not None:
+        from_file = read_params_file(params_file)
+        values.update(from_file)
+        given.update(from_file)
     for item in items:
         if ":=" not in item:
-            raise BagError(f"parameter {item!r} is not of the form name:=value")
+            raise ParameterError(f"parameter {item!r} is not of the form name:=value")
         name, text = item.split(":=", 1)
-        if name not in PARAMS:
-            raise BagError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
-        default = PARAMS[name].default
-        try:
-            if isinstance(default, bool):
-                if text.lower() not in ("true", "false"):
-                    raise ValueError
-                value: Any = text.lower() == "true"
-            elif isinstance(default, int):
-                value = int(text)
-            elif isinstance(default, float):
-                value = float(text)
-            else:
-                value = text
-        except ValueError:
-            raise BagError(f"parameter {name}: cannot read {text!r}") from None
-        error = parameter_error(name, value)
-        if error:
-            raise BagError(error)
-        values[name] = value
-    return values
+        values[name] = parse_value(name, text)
+        given.add(name)
+    try:
+        pipeline_config(values)
+        monitor_config(values)
+    except ValueError as err:
+        raise ParameterError(str(err)) from None
+    return GivenParams(values, frozenset(given))
+
+
+def parse_params(items: Sequence[str]) -> dict[str, Any]:
+    """``name:=value`` strings -> node parameter values (defaults for the rest), validated."""
+    return given_params(items).values

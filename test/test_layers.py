@@ -38,7 +38,28 @@ GEOMETRY_FOLDERS = {"solvers", "robust", "fundamental", "separable", "calibrated
 PACKAGE_ALLOWED: dict[str, set[str]] = {
     "geometry": set(),
     "pipeline": {"geometry"},
+    "stream": set(),
+    "synthetic": {"geometry"},
+    "fleet": set(),
+    "ros": {"geometry", "pipeline", "stream", "synthetic", "fleet"},
+    "evaluation": {"geometry", "pipeline", "ros"},
 }
+ROS = "sepfm_ros.ros"
+#: subpackage of sepfm_ros.ros -> the subpackages it may import (besides itself), by role:
+#: message adapters, the session (a stream's set-up and answers), bag I/O and offline pairing,
+#: offline paths (a bag through the session), the node runtime, and the commands on top
+ROS_ALLOWED: dict[str, set[str]] = {
+    "msgs": set(),
+    "session": {"msgs"},
+    "bags": {"msgs", "session"},
+    "offline": {"msgs", "session", "bags"},
+    "node": {"msgs", "session", "bags"},
+    "commands": {"msgs", "session", "bags", "offline", "node"},
+}
+#: modules of ros/commands that are not commands (any command, and eval, may import them)
+COMMAND_LIBRARIES = {f"{ROS}.commands.options"}
+#: what the rest of sepfm_ros may import of sepfm_ros.ros (the eval and demo commands)
+ROS_USERS_ALLOWED = {"msgs", "session", "bags", "node"}
 
 
 def module_name(path: Path, root: Path) -> str:
@@ -120,6 +141,33 @@ def upward_imports(graph: dict[str, set[str]]) -> list[str]:
     return bad
 
 
+def ros_part(module: str) -> str | None:
+    """The subpackage of sepfm_ros.ros a module is in (None: outside, or ros itself)."""
+    if not module.startswith(ROS + "."):
+        return None
+    return module[len(ROS) + 1 :].split(".")[0]
+
+
+def ros_imports(graph: dict[str, set[str]]) -> list[str]:
+    """Every import that breaks a rule of sepfm_ros.ros's layout, as 'importer -> imported
+    (why)': a subpackage importing one above it, a command importing another command, and
+    a module outside ros importing a ros command or an offline path."""
+    bad = []
+    for module, targets in sorted(graph.items()):
+        a = ros_part(module)
+        for target in sorted(targets):
+            b = ros_part(target)
+            if b is None or target in COMMAND_LIBRARIES:
+                continue
+            if a is None and b not in ROS_USERS_ALLOWED:
+                bad.append(f"{module} -> {target} (outside ros: {sorted(ROS_USERS_ALLOWED)})")
+            elif a == b == "commands":
+                bad.append(f"{module} -> {target} (a command imports another command)")
+            elif a is not None and a != b and b not in ROS_ALLOWED.get(a, set()):
+                bad.append(f"{module} -> {target} (ros/{a} may import {sorted(ROS_ALLOWED[a])})")
+    return bad
+
+
 def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components of more than one module (Tarjan), each sorted."""
     index: dict[str, int] = {}
@@ -157,6 +205,52 @@ def cycles(graph: dict[str, set[str]]) -> list[list[str]]:
 
 def test_no_import_points_up_a_layer():
     assert upward_imports(import_graph()) == []
+
+
+def test_ros_subpackages_import_down_and_no_command_imports_another():
+    assert ros_imports(import_graph()) == []
+
+
+def test_every_ros_module_is_in_a_role_subpackage():
+    """ros/ holds subpackages by role only (no flat modules beside them)."""
+    ros = PACKAGE / "ros"
+    flat = sorted(p.name for p in ros.glob("*.py") if p.name != "__init__.py")
+    assert flat == [], flat
+    assert {p.name for p in ros.iterdir() if (p / "__init__.py").is_file()} == set(ROS_ALLOWED)
+
+
+def test_the_ros_rules_see_a_command_importing_a_command(tmp_path):
+    """The rules fire on a tiny tree: a command importing another, the session importing the
+    node, the evaluation importing a command; the shared options are allowed."""
+    pkg = tmp_path / "sepfm_ros"
+    files = {
+        "__init__.py": "",
+        "ros/__init__.py": "",
+        "ros/commands/__init__.py": "",
+        "ros/commands/options.py": "",
+        "ros/commands/record.py": "from sepfm_ros.ros.commands import replay, options\n",
+        "ros/commands/replay.py": "from sepfm_ros.ros.node.replayer import Replayer\n",
+        "ros/node/__init__.py": "",
+        "ros/node/replayer.py": "Replayer = 1\n",
+        "ros/session/__init__.py": "",
+        "ros/session/session.py": "from sepfm_ros.ros.node import replayer\n",
+        "evaluation/__init__.py": "",
+        "evaluation/cli.py": (
+            "import sepfm_ros.ros.commands.record\nimport sepfm_ros.ros.commands.options\n"
+        ),
+    }
+    for rel, text in files.items():
+        (pkg / rel).parent.mkdir(parents=True, exist_ok=True)
+        (pkg / rel).write_text(text)
+    bad = ros_imports(import_graph(pkg))
+    assert bad == [
+        "sepfm_ros.evaluation.cli -> sepfm_ros.ros.commands.record (outside ros: "
+        "['bags', 'msgs', 'node', 'session'])",
+        "sepfm_ros.ros.commands.record -> sepfm_ros.ros.commands.replay (a command imports "
+        "another command)",
+        "sepfm_ros.ros.session.session -> sepfm_ros.ros.node.replayer (ros/session may import "
+        "['msgs'])",
+    ], bad
 
 
 def test_no_import_cycle_between_modules():

@@ -33,12 +33,15 @@ from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 
 @dataclass
 class PairRow:
-    """One checked pair: its stamp, figures and the monitor's decision after it."""
+    """One checked pair: its stamp, figures and the monitor's decision after it, and the
+    pair's answer (``F``: 3x3 in the answer's coordinates, None without F; ``inliers``)."""
 
     index: int
     stamp_ns: int
     check: PairCheck
     status: CalibrationStatus
+    F: np.ndarray | None = None
+    inliers: int = 0
 
 
 @dataclass(frozen=True)
@@ -145,7 +148,10 @@ def _check_one(stream: BagStream, job: PairJob, index: int, out: TextIO) -> Pair
     if calibrated is None or calibrated.check is None or calibrated.status is None:
         problem = stream.session.calibrated.calibration.rig_problem
         raise CalibrationError(problem or "no calibrated stereo rig")
-    return PairRow(index, stamp, calibrated.check, calibrated.status)
+    F = np.reshape(answer.estimate.f, (3, 3)) if answer.has_f else None
+    return PairRow(
+        index, stamp, calibrated.check, calibrated.status, F, int(answer.estimate.inliers)
+    )
 
 
 def _row_line(row: PairRow, total: int) -> str:

@@ -24,10 +24,10 @@ import subprocess
 import sys
 import threading
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import IO, TYPE_CHECKING
 
 import cv2
 import numpy as np
@@ -37,6 +37,11 @@ from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.writer import check_output_path
 
 if TYPE_CHECKING:
+    from rclpy.context import Context
+    from rclpy.node import Node
+
+    from sepfm_ros.ros.bags.inputs import InputSpec
+    from sepfm_ros.ros.node.recorder import Recorder
     from sepfm_ros.ros.node.replayer import Replayer
 
 PACKAGE_DIR = Path(__file__).resolve().parent
@@ -105,32 +110,121 @@ def replay_through_node(
     however busy the machine; a pair still unanswered after ``answer_timeout_s`` seconds
     without any new answer is given up (it lacks a row).
     """
-    import rclpy
-    from diagnostic_msgs.msg import DiagnosticArray
-    from rclpy.executors import SingleThreadedExecutor
-
-    from sepfm_ros.ros.bags.inputs import camera_info_topics, detect_inputs
-    from sepfm_ros.ros.bags.pairing import iter_pairs
-    from sepfm_ros.ros.bags.results import calibrated_topics, output_topics
-    from sepfm_ros.ros.bags.writer import BagWriter
-    from sepfm_ros.ros.node.recorder import Recorder
+    from sepfm_ros.ros.bags.inputs import camera_info_topics
+    from sepfm_ros.ros.bags.results import output_topics
     from sepfm_ros.ros.node.replayer import Replayer
-    from sepfm_ros.ros.session.parameters import parse_params
-    from sepfm_ros.ros.session.session import Session
 
     params = list(params or [])
     check_output_path(out)
+    spec, completions = _pair_completions(bag, params)
+    expected = len(completions)
+    node_proc, log = _start_node(spec, params, log_path)
+    listener = _start_listener(out, debug_image)
+    counts = listener.recorder.counts
+    answers = Answers(counts, list(output_topics().values()), node_proc, answer_timeout_s)
+
+    def hold(msg: RawMessage) -> None:
+        """Before ``msg``: the node's answers to every pair completed before it."""
+        answers.wait(bisect.bisect_left(completions, msg.log_time_ns))
+
+    replayer = None
+    published = 0
+    try:
+        # the images and, where the bag has them, their camera_info (calibrated outputs)
+        with BagReader(bag) as reader:
+            infos = [t for t in camera_info_topics(reader, spec) if t in reader.topics]
+        # reliable whatever the bag recorded: a best-effort camera's recording would otherwise
+        # lose its large frames to the transport on this host (sepfm_ros/ros/dds.py)
+        replayer = Replayer(
+            listener.node, bag, topics=[*spec.topics, *infos], rate=rate, reliable=True
+        )
+        _wait_until_serving(node_proc, listener, replayer, spec, bag, infos, startup_timeout_s)
+        time.sleep(0.2)
+        published = replayer.run(progress=progress, hold=hold)
+        answers.wait(expected)
+        time.sleep(0.3)  # let the debug image of the final pair arrive (drawn after the answer)
+    finally:
+        _stop_node(node_proc)
+        listener.stop_spinning()
+        if replayer is not None:
+            replayer.close()
+        listener.close()
+        if log is not subprocess.DEVNULL:
+            log.close()
+    return LiveRun(expected, published, dict(counts), node_proc.returncode, out)
+
+
+def _pair_completions(bag: Path, params: list[str]) -> tuple[InputSpec, list[int]]:
+    """The bag's inputs, and the log time (ns) of the message completing each pair the node
+    forms with ``params`` (its pairing), in bag order."""
+    from sepfm_ros.ros.bags.inputs import detect_inputs
+    from sepfm_ros.ros.bags.pairing import iter_pairs
+    from sepfm_ros.ros.session.parameters import parse_params
+    from sepfm_ros.ros.session.session import Session
+
     with BagReader(bag) as reader:
         spec = detect_inputs(reader)
-        # log time (ns) of the message completing each pair the node forms (its pairing)
         session = Session(parse_params(params), spec.mode == "stereo", spec.topics)
         completions = [job.log_time_ns for job in iter_pairs(reader, spec, session)]
-    expected = len(completions)
+    return spec, completions
+
+
+def _start_node(
+    spec: InputSpec, params: Sequence[str], log_path: Path | None
+) -> tuple[subprocess.Popen, IO[str] | int]:
+    """Start the ``sepfm`` node subprocess for the bag's inputs with ``params``, its output to
+    ``log_path`` (or discarded); the process and the open log (or ``subprocess.DEVNULL``)."""
     cmd = [sys.executable, "-m", "sepfm_ros", "node", "--ros-args", *spec.node_params()]
     for p in params:
         cmd += ["-p", p]
     log = open(log_path, "w") if log_path else subprocess.DEVNULL  # noqa: SIM115
     node_proc = subprocess.Popen(cmd, stdout=log, stderr=subprocess.STDOUT, env=dict(os.environ))
+    return node_proc, log
+
+
+@dataclass
+class _Listener:
+    """The demo's own ROS node, spun on a thread of its own: it records the sepfm node's outputs
+    and reads the node's /diagnostics.
+
+    Attributes:
+        matched: the node's own counts from /diagnostics: matched input publishers
+            (``input_publishers``), result subscribers (``output_subscribers``) and
+            ``camera_info_ready`` (1 once every camera's camera_info arrived).
+    """
+
+    context: Context
+    node: Node
+    recorder: Recorder
+    matched: dict[str, int]
+    stop: threading.Event
+    spinner: threading.Thread
+
+    def stop_spinning(self) -> None:
+        """Stop the spinning thread (waits up to 5 s)."""
+        self.stop.set()
+        self.spinner.join(timeout=5)
+
+    def close(self) -> None:
+        """Close the recording, destroy the node and shut its ROS context down."""
+        import rclpy
+
+        self.recorder.close()
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+def _start_listener(out: Path, debug_image: bool) -> _Listener:
+    """A fresh ROS context and node recording the sepfm node's outputs (and its debug image with
+    ``debug_image``) into the bag ``out``, listening to /diagnostics, spinning on a thread."""
+    import rclpy
+    from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import SingleThreadedExecutor
+
+    from sepfm_ros.ros.bags.results import calibrated_topics, output_topics
+    from sepfm_ros.ros.bags.writer import BagWriter
+    from sepfm_ros.ros.node.recorder import Recorder
+
     context = rclpy.Context()
     rclpy.init(context=context)
     node = rclpy.create_node(f"sepfm_demo_{os.getpid()}", context=context)
@@ -159,66 +253,67 @@ def replay_through_node(
 
     spinner = threading.Thread(target=spin, daemon=True)
     spinner.start()
-    answers = Answers(recorder.counts, list(output_topics().values()), node_proc, answer_timeout_s)
+    return _Listener(context, node, recorder, node_matched, stop, spinner)
 
-    def hold(msg: RawMessage) -> None:
-        """Before ``msg``: the node's answers to every pair completed before it."""
-        answers.wait(bisect.bisect_left(completions, msg.log_time_ns))
 
-    replayer = None
-    published = 0
-    try:
-        # the images and, where the bag has them, their camera_info (calibrated outputs)
-        with BagReader(bag) as reader:
-            infos = [t for t in camera_info_topics(reader, spec) if t in reader.topics]
-        # reliable whatever the bag recorded: a best-effort camera's recording would otherwise
-        # lose its large frames to the transport on this host (sepfm_ros/ros/dds.py)
-        replayer = Replayer(node, bag, topics=[*spec.topics, *infos], rate=rate, reliable=True)
-        deadline = time.monotonic() + startup_timeout_s
-        while not recorder.ready():
-            if node_proc.poll() is not None:
-                raise BagError(f"the node exited with code {node_proc.returncode} at start-up")
-            if time.monotonic() > deadline:
-                raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
-            time.sleep(0.05)
-        replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
-        # matching is one-sided: also wait until the node's inputs have matched our publishers
-        # and its result publishers our recorder (its /diagnostics reports both), or the first
-        # messages can be lost
-        while node_matched["input_publishers"] < 1 or node_matched["output_subscribers"] < 1:
-            if time.monotonic() > deadline:
-                raise BagError("the node did not match the player and recorder within the timeout")
-            time.sleep(0.05)
-        if infos:
-            # a camera driver publishes camera_info all along: the node has it before the first
-            # pair, as `process` has (the bag may hold a frame's image before its camera_info)
-            prime_camera_info(replayer, bag, infos)
-            while node_matched["camera_info_ready"] < 1:
-                if time.monotonic() > deadline:
-                    raise BagError("the node did not receive camera_info within the timeout")
-                time.sleep(0.05)
-        time.sleep(0.2)
-        published = replayer.run(progress=progress, hold=hold)
-        answers.wait(expected)
-        time.sleep(0.3)  # let the debug image of the final pair arrive (drawn after the answer)
-    finally:
-        if node_proc.poll() is None:
-            node_proc.send_signal(signal.SIGINT)
-            try:
-                node_proc.wait(timeout=15)
-            except subprocess.TimeoutExpired:
-                node_proc.kill()
-                node_proc.wait()
-        stop.set()
-        spinner.join(timeout=5)
-        if replayer is not None:
-            replayer.close()
-        recorder.close()
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
-        if log is not subprocess.DEVNULL:
-            log.close()
-    return LiveRun(expected, published, dict(recorder.counts), node_proc.returncode, out)
+def _wait_until_serving(
+    node_proc: subprocess.Popen,
+    listener: _Listener,
+    replayer: Replayer,
+    spec: InputSpec,
+    bag: Path,
+    infos: Sequence[str],
+    startup_timeout_s: float,
+) -> None:
+    """Wait (at most ``startup_timeout_s`` s in all) until the node's outputs are up, it and the
+    player and recorder have matched, and it holds the camera_info of ``infos`` (the first of
+    each published here first); BagError when the node exits or time runs out."""
+    deadline = time.monotonic() + startup_timeout_s
+    while not listener.recorder.ready():
+        if node_proc.poll() is not None:
+            raise BagError(f"the node exited with code {node_proc.returncode} at start-up")
+        if time.monotonic() > deadline:
+            raise BagError(f"the node's outputs did not appear within {startup_timeout_s} s")
+        time.sleep(0.05)
+    replayer.wait_for_subscribers(spec.topics, max(1.0, deadline - time.monotonic()))
+    # matching is one-sided: also wait until the node's inputs have matched our publishers
+    # and its result publishers our recorder (its /diagnostics reports both), or the first
+    # messages can be lost
+    matched = listener.matched
+    _wait_until(
+        lambda: matched["input_publishers"] >= 1 and matched["output_subscribers"] >= 1,
+        deadline,
+        "the node did not match the player and recorder within the timeout",
+    )
+    if infos:
+        # a camera driver publishes camera_info all along: the node has it before the first
+        # pair, as `process` has (the bag may hold a frame's image before its camera_info)
+        prime_camera_info(replayer, bag, infos)
+        _wait_until(
+            lambda: matched["camera_info_ready"] >= 1,
+            deadline,
+            "the node did not receive camera_info within the timeout",
+        )
+
+
+def _wait_until(done: Callable[[], bool], deadline: float, error: str) -> None:
+    """Poll ``done`` every 50 ms until it holds; BagError(``error``) once ``deadline``
+    (``time.monotonic()`` s) has passed."""
+    while not done():
+        if time.monotonic() > deadline:
+            raise BagError(error)
+        time.sleep(0.05)
+
+
+def _stop_node(node_proc: subprocess.Popen) -> None:
+    """Stop the node subprocess if it runs: SIGINT, then kill after 15 s."""
+    if node_proc.poll() is None:
+        node_proc.send_signal(signal.SIGINT)
+        try:
+            node_proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            node_proc.kill()
+            node_proc.wait()
 
 
 def prime_camera_info(replayer: Replayer, bag: Path, topics: Sequence[str]) -> None:

@@ -399,11 +399,13 @@ def write_csv(path: Path, rows: list[dict]) -> None:
         w.writerows(rows)
 
 
-def write_report(res: EvalResults, out: Path, command: str = "", notes: str = "") -> Path:
-    """Write the report folder; returns the path of ``report.md``."""
-    out.mkdir(parents=True, exist_ok=True)
-    sums = summaries(res)
-    comps = comparisons(res)
+def _write_data(
+    res: EvalResults,
+    out: Path,
+    sums: dict[str, list[metrics.Summary]],
+    comps: list[metrics.PairedComparison],
+) -> None:
+    """``runs.csv``, ``pairs.csv`` and ``summary.json`` in ``out``."""
     write_csv(out / "runs.csv", res.runs)
     write_csv(out / "pairs.csv", res.pairs)
     (out / "summary.json").write_text(
@@ -419,6 +421,10 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
             default=str,
         )
     )
+
+
+def _write_figures(res: EvalResults, out: Path) -> dict[str, str]:
+    """The PNGs in ``out``; scene -> its example's file name, or why it could not be drawn."""
     figs = {
         "fig4_trials.png": fig4_trials,
         "fig7_line_inliers.png": fig7_line_inliers,
@@ -435,7 +441,11 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
             example_files[scene] = name
         except Exception as exc:  # a drawing problem must not lose the report
             example_files[scene] = f"(could not draw: {exc!r})"
+    return example_files
 
+
+def _intro_md(res: EvalResults, command: str, notes: str) -> list[str]:
+    """The report's title, what was evaluated and how (lines of Markdown)."""
     cfg = res.config
     n_seeds = len(cfg.seeds)
     md = ["# Fundamental-matrix estimators on pairs with ground truth", ""]
@@ -457,8 +467,16 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
     ]
     if notes:
         md += [notes, ""]
+    return md
+
+
+def _tables_md(
+    res: EvalResults, sums: dict[str, list[metrics.Summary]], comps: list[metrics.PairedComparison]
+) -> list[str]:
+    """The methods, then the tables: overall, relative pose, failures, paired comparison and one
+    accuracy table per scene (lines of Markdown)."""
     methods_desc = [f"- `{m}`: {REGISTRY[m].description}" for m in res.methods if m in REGISTRY]
-    md += ["## Methods", "", *methods_desc, ""]
+    md = ["## Methods", "", *methods_desc, ""]
     md += ["## Overall (paper's Tables 2-4 layout)", "", accuracy_table(sums[OVERALL])]
     poses = pose_table(res)
     if poses:
@@ -476,7 +494,7 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
     md += [failure_table(res, sums[OVERALL])]
     if comps:
         md += [
-            f"## Paired comparison against `{cfg.baseline}`",
+            f"## Paired comparison against `{res.config.baseline}`",
             "",
             "Per pair, each metric is averaged over seeds; a method wins a pair when it is better. "
             "A win-fraction interval that contains 0.5 means the difference is not distinguishable "
@@ -489,7 +507,12 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
             continue
         n_pairs = len({p["pair"] for p in res.pairs if p["scene"] == scene})
         md += [f"## Scene `{scene}` ({n_pairs} pairs)", "", accuracy_table(rows)]
-    md += [
+    return md
+
+
+def _figures_md(example_files: dict[str, str]) -> list[str]:
+    """The figures section: the four plots, then each scene's example or why it is missing."""
+    md = [
         "## Figures",
         "",
         "Theoretical RANSAC trials (paper's Fig. 4) and measured hypotheses per run:",
@@ -516,7 +539,12 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
             md += [f"Example `{scene}`:", "", f"![{scene}]({name})", ""]
         else:
             md += [f"Example `{scene}`: {name}", ""]
-    md += ["## Pairs that could not be evaluated", ""]
+    return md
+
+
+def _errors_md(res: EvalResults) -> list[str]:
+    """The pairs that could not be evaluated and where the data files are (lines of Markdown)."""
+    md = ["## Pairs that could not be evaluated", ""]
     if res.errors:
         md += ["| pair | scene | reason |", "|---|---|---|"]
         md += [f"| {e.pair_id} | {e.scene} | {e.message.replace('|', '/')} |" for e in res.errors]
@@ -527,6 +555,20 @@ def write_report(res: EvalResults, out: Path, command: str = "", notes: str = ""
         "Per-run results: `runs.csv`; per-pair data: `pairs.csv`; all tables: `summary.json`.",
         "",
     ]
+    return md
+
+
+def write_report(res: EvalResults, out: Path, command: str = "", notes: str = "") -> Path:
+    """Write the report folder; returns the path of ``report.md``."""
+    out.mkdir(parents=True, exist_ok=True)
+    sums = summaries(res)
+    comps = comparisons(res)
+    _write_data(res, out, sums, comps)
+    example_files = _write_figures(res, out)
+    md = _intro_md(res, command, notes)
+    md += _tables_md(res, sums, comps)
+    md += _figures_md(example_files)
+    md += _errors_md(res)
     path = out / "report.md"
     path.write_text("\n".join(md))
     return path

@@ -18,7 +18,7 @@ import numpy as np
 
 from sepfm_ros.evaluation import metrics
 from sepfm_ros.evaluation.manifest import PairDataError, PairError, PairSpec
-from sepfm_ros.evaluation.matches_cache import MatchesCache
+from sepfm_ros.evaluation.matches_cache import MatchesCache, PairMatches
 from sepfm_ros.evaluation.methods import Method, MethodResult
 from sepfm_ros.geometry.separable.stage1 import line_homography_error
 
@@ -87,18 +87,9 @@ def _safe_run(method: Method, pts_a, pts_b, size_a, size_b, cfg: EvalConfig, see
         return MethodResult(None, 0, hyp, hyp, hyp, math.nan, status=f"error: {exc!r}")
 
 
-def _evaluate_pair(
-    res: EvalResults,
-    pair: PairSpec,
-    methods: Sequence[Method],
-    cache: MatchesCache,
-    progress: Callable[[int, str], None] | None,
-    cameras: Mapping[Path, np.ndarray] | None = None,
-) -> None:
-    """Match one pair and run every method x seed on it, appending to ``res``."""
-    cfg = res.config
-    steps_per_pair = len(methods) * len(cfg.seeds)
-    line_method = next((m.name for m in methods if m.separable), None)
+def _pair_matches(res: EvalResults, pair: PairSpec, cache: MatchesCache) -> PairMatches | None:
+    """The pair's putative matches (at least :data:`MIN_MATCHES`), or None after recording in
+    ``res.errors`` why the pair cannot be evaluated."""
     try:
         pm = cache.matches(pair)
         n = pm.pts_a.shape[0]
@@ -109,67 +100,120 @@ def _evaluate_pair(
             )
     except PairDataError as exc:
         res.errors.append(PairError(pair.pair_id, pair.scene, str(exc)))
-        if progress:
-            progress(steps_per_pair, pair.pair_id)
-        return
+        return None
     except Exception as exc:  # e.g. cv2.error on a corrupt image
         res.errors.append(PairError(pair.pair_id, pair.scene, f"matching failed: {exc!r}"))
+        return None
+    return pm
+
+
+def _pair_row(pair: PairSpec, pm: PairMatches, positive: np.ndarray) -> dict:
+    """The pair's row of ``EvalResults.pairs``; ``positive``: (N,) bool, the GT positives."""
+    n = pm.pts_a.shape[0]
+    n_pos = int(np.count_nonzero(positive))
+    return {
+        "pair": pair.pair_id,
+        "scene": pair.scene,
+        "kind": pair.kind,
+        "baseline": pair.baseline,
+        "n_matches": n,
+        "n_positives": n_pos,
+        "outlier_rate": metrics.outlier_rate(n_pos, n),
+        "cached": pm.from_cache,
+    }
+
+
+def _gt_cameras(
+    pair: PairSpec, cameras: Mapping[Path, np.ndarray] | None
+) -> tuple[np.ndarray, np.ndarray] | None:
+    """The GT 3x4 cameras of the pair's two images, or None unless both have one."""
+    if cameras and pair.img_a is not None and pair.img_b is not None:
+        P_a, P_b = cameras.get(pair.img_a.resolve()), cameras.get(pair.img_b.resolve())
+        return (P_a, P_b) if P_a is not None and P_b is not None else None
+    return None
+
+
+def _run_row(
+    pair: PairSpec,
+    pm: PairMatches,
+    positive: np.ndarray,
+    gt_cams: tuple[np.ndarray, np.ndarray] | None,
+    method: Method,
+    seed: int,
+    r: MethodResult,
+    cfg: EvalConfig,
+) -> dict:
+    """One run's row of ``EvalResults.runs`` (see there for the columns, in this order);
+    the pose errors (deg) are None without ``gt_cams``."""
+    m = metrics.run_metrics(r.F, pm.pts_a, pm.pts_b, positive, cfg.threshold)
+    rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
+    rec["seed"] = seed
+    rec.update(asdict(m))
+    rot_err = dir_err = None
+    if gt_cams is not None:
+        rot_err, dir_err = metrics.pose_errors(r.F, pm.pts_a, pm.pts_b, *gt_cams, cfg.threshold)
+    rec.update(rotation_error_deg=rot_err, translation_error_deg=dir_err)
+    rec.update(
+        has_model=r.F is not None,
+        hypotheses=r.hypotheses,
+        stage1_hypotheses=r.stage1_hypotheses,
+        stage2_hypotheses=r.stage2_hypotheses,
+        ms=r.ms,
+        own_inliers=r.own_inliers,
+        status=r.status,
+        fallback=r.fallback,
+        line_inliers=len(r.line_inliers) if method.separable else None,
+    )
+    return rec
+
+
+def _keep_run_extras(
+    res: EvalResults,
+    pair: PairSpec,
+    pm: PairMatches,
+    positive: np.ndarray,
+    methods: Sequence[Method],
+    method: Method,
+    seed: int,
+    r: MethodResult,
+) -> None:
+    """What the report draws besides the run's row: the line inliers (and, for the first
+    separable method, the line homography errors) of a run that found a line pair, and the
+    scene's example (first seed of the first separable method, else of the first method)."""
+    line_method = next((m.name for m in methods if m.separable), None)
+    if method.separable and r.line_pair is not None and len(r.line_inliers):
+        res.line_inliers.append((method.name, len(r.line_inliers)))
+        if method.name == line_method:
+            _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair)
+    if pair.scene not in res.examples and seed == res.config.seeds[0]:
+        if method.name == (line_method or methods[0].name):
+            res.examples[pair.scene] = Example(pair, pm.pts_a, pm.pts_b, positive, method.name, r)
+
+
+def _evaluate_pair(
+    res: EvalResults,
+    pair: PairSpec,
+    methods: Sequence[Method],
+    cache: MatchesCache,
+    progress: Callable[[int, str], None] | None,
+    cameras: Mapping[Path, np.ndarray] | None = None,
+) -> None:
+    """Match one pair and run every method x seed on it, appending to ``res``."""
+    cfg = res.config
+    pm = _pair_matches(res, pair, cache)
+    if pm is None:
         if progress:
-            progress(steps_per_pair, pair.pair_id)
+            progress(len(methods) * len(cfg.seeds), pair.pair_id)
         return
     size_b = pm.size_b or pm.size_a
     positive = metrics.positives(pair.F_gt, pm.pts_a, pm.pts_b)
-    n_pos = int(np.count_nonzero(positive))
-    res.pairs.append(
-        {
-            "pair": pair.pair_id,
-            "scene": pair.scene,
-            "kind": pair.kind,
-            "baseline": pair.baseline,
-            "n_matches": n,
-            "n_positives": n_pos,
-            "outlier_rate": metrics.outlier_rate(n_pos, n),
-            "cached": pm.from_cache,
-        }
-    )
-    gt_cams = None
-    if cameras and pair.img_a is not None and pair.img_b is not None:
-        P_a, P_b = cameras.get(pair.img_a.resolve()), cameras.get(pair.img_b.resolve())
-        gt_cams = (P_a, P_b) if P_a is not None and P_b is not None else None
+    res.pairs.append(_pair_row(pair, pm, positive))
+    gt_cams = _gt_cameras(pair, cameras)
     for method in methods:
         for seed in cfg.seeds:
             r = _safe_run(method, pm.pts_a, pm.pts_b, pm.size_a, size_b, cfg, seed)
-            m = metrics.run_metrics(r.F, pm.pts_a, pm.pts_b, positive, cfg.threshold)
-            rec = {"pair": pair.pair_id, "scene": pair.scene, "method": method.name}
-            rec["seed"] = seed
-            rec.update(asdict(m))
-            rot_err = dir_err = None
-            if gt_cams is not None:
-                rot_err, dir_err = metrics.pose_errors(
-                    r.F, pm.pts_a, pm.pts_b, *gt_cams, cfg.threshold
-                )
-            rec.update(rotation_error_deg=rot_err, translation_error_deg=dir_err)
-            rec.update(
-                has_model=r.F is not None,
-                hypotheses=r.hypotheses,
-                stage1_hypotheses=r.stage1_hypotheses,
-                stage2_hypotheses=r.stage2_hypotheses,
-                ms=r.ms,
-                own_inliers=r.own_inliers,
-                status=r.status,
-                fallback=r.fallback,
-                line_inliers=len(r.line_inliers) if method.separable else None,
-            )
-            res.runs.append(rec)
-            if method.separable and r.line_pair is not None and len(r.line_inliers):
-                res.line_inliers.append((method.name, len(r.line_inliers)))
-                if method.name == line_method:
-                    _collect_line_errors(res, r, pm.pts_a, pm.pts_b, pair)
-            if pair.scene not in res.examples and seed == cfg.seeds[0]:
-                if method.name == (line_method or methods[0].name):
-                    res.examples[pair.scene] = Example(
-                        pair, pm.pts_a, pm.pts_b, positive, method.name, r
-                    )
+            res.runs.append(_run_row(pair, pm, positive, gt_cams, method, seed, r, cfg))
+            _keep_run_extras(res, pair, pm, positive, methods, method, seed, r)
             if progress:
                 progress(1, pair.pair_id)
 

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
 
@@ -116,12 +117,7 @@ class SepfmNode(Node):
         the log, ``/diagnostics`` and the advice on lost samples (None: not configured)."""
         super().__init__(node_name, **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
-        for name, spec in PARAMS.items():
-            self.declare_parameter(name, spec.default, descriptor(name, spec))
-        values = self._param_values()
-        errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
-        if errors:
-            raise ValueError("invalid parameters: " + "; ".join(errors))
+        values = self._declare_parameters()
         self._mode = values["mode"]
         self._transport = values["transport"]
         self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
@@ -136,27 +132,8 @@ class SepfmNode(Node):
 
         self._out = NodeOutputs(self)
 
-        msg_type = CompressedImage if self._transport == "compressed" else Image
-        if self._mode == "stereo":
-            inputs = [
-                ("left/image_raw", lambda m: self._on_stereo(m, LEFT)),
-                ("right/image_raw", lambda m: self._on_stereo(m, RIGHT)),
-            ]
-        else:
-            inputs = [("image_raw", self._on_motion)]
-        self._subs = [
-            InputSubscription(
-                self,
-                input_topic(self, base, self._transport),
-                msg_type,
-                callback,
-                values["input_reliability"],
-                on_lost=self._on_lost,
-                on_incompatible=self._on_incompatible,
-                on_created=self._on_subscribed,
-            )
-            for base, callback in inputs
-        ]
+        inputs = self._input_callbacks()
+        self._subs = self._input_subscriptions(inputs, values["input_reliability"])
         bases = [base for base, _ in inputs]
         self._session = Session(
             values,
@@ -168,16 +145,7 @@ class SepfmNode(Node):
             parallel_detect=True,
         )
         self._pairing = self._session.pairing()
-        self._camera_info = None
-        if values["use_camera_info"]:
-            self._camera_info = CameraInfoInputs(
-                self,
-                bases,
-                values["input_reliability"],
-                on_lost=self._on_lost,
-                on_incompatible=self._on_incompatible,
-                on_created=self._on_subscribed,
-            )
+        self._camera_info = self._camera_info_inputs(values, bases)
         self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
@@ -193,6 +161,60 @@ class SepfmNode(Node):
             f"{self._mode} mode, {self._transport} transport, input reliability "
             f"{values['input_reliability']}, listening on "
             f"{', '.join(s.topic for s in self._subs)}; {self._session.pipeline.config}"
+        )
+
+    def _declare_parameters(self) -> dict[str, Any]:
+        """Declare every parameter; their values (ValueError listing the invalid ones)."""
+        for name, spec in PARAMS.items():
+            self.declare_parameter(name, spec.default, descriptor(name, spec))
+        values = self._param_values()
+        errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
+        if errors:
+            raise ValueError("invalid parameters: " + "; ".join(errors))
+        return values
+
+    def _input_callbacks(self) -> list[tuple[str, Callable[[Any], None]]]:
+        """(base topic name, callback) of each image input of the mode: left and right, or one."""
+        if self._mode == "stereo":
+            return [
+                ("left/image_raw", lambda m: self._on_stereo(m, LEFT)),
+                ("right/image_raw", lambda m: self._on_stereo(m, RIGHT)),
+            ]
+        return [("image_raw", self._on_motion)]
+
+    def _input_subscriptions(
+        self, inputs: list[tuple[str, Callable[[Any], None]]], reliability: str
+    ) -> list[InputSubscription]:
+        """A subscription per image input, of the transport's message type."""
+        msg_type = CompressedImage if self._transport == "compressed" else Image
+        return [
+            InputSubscription(
+                self,
+                input_topic(self, base, self._transport),
+                msg_type,
+                callback,
+                reliability,
+                on_lost=self._on_lost,
+                on_incompatible=self._on_incompatible,
+                on_created=self._on_subscribed,
+            )
+            for base, callback in inputs
+        ]
+
+    def _camera_info_inputs(
+        self, values: dict[str, Any], bases: list[str]
+    ) -> CameraInfoInputs | None:
+        """The camera_info subscriptions beside the image inputs ``bases`` (None unless the
+        ``use_camera_info`` parameter is set)."""
+        if not values["use_camera_info"]:
+            return None
+        return CameraInfoInputs(
+            self,
+            bases,
+            values["input_reliability"],
+            on_lost=self._on_lost,
+            on_incompatible=self._on_incompatible,
+            on_created=self._on_subscribed,
         )
 
     # ---------------------------------------------------------------- parameters

@@ -28,7 +28,7 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
-DDS_PROFILES = Path(__file__).resolve().parent.parent / "data" / "fastdds_node_profiles.xml"
+DDS_PROFILES = Path(__file__).resolve().parents[2] / "data" / "fastdds_node_profiles.xml"
 #: Fast DDS reads these; when any is set (or the working directory holds Fast DDS's default XML),
 #: the user configures the middleware and we leave it alone.
 USER_DDS_CONFIG = (

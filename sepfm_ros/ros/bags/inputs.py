@@ -57,10 +57,6 @@ class InputSpec:
         """The ``camera_info`` beside each input image topic (image_transport's convention)."""
         return tuple(camera_info_topic(t) for t in self.topics)
 
-    def rectified(self) -> bool:
-        """The images are rectified (``image_rect`` topics)."""
-        return all("rect" in t for t in self.topics)
-
     def describe(self) -> str:
         """One line for the user: mode and topics."""
         return f"{self.mode} from {' + '.join(self.topics)}"

@@ -15,19 +15,21 @@ from typing import Any
 
 from rclpy.node import Node
 
-from sepfm_ros.ros.msgs.headers import camera_info_topic as camera_info_beside
+from sepfm_ros.ros.msgs.headers import camera_info_topic
 from sepfm_ros.ros.node.subscriptions import InputSubscription
 
 CAMERA_INFO = "camera_info"
 
 
-def camera_info_topic(node: Node, image_base: str) -> str:
-    """The camera_info topic of image topic ``image_base`` (e.g. ``left/image_raw``)."""
+def node_camera_info_topic(node: Node, image_base: str) -> str:
+    """The camera_info topic a node follows for its image topic ``image_base`` (e.g.
+    ``left/image_raw``): a remap of ``left/camera_info`` when the user gave one, else the topic
+    beside the resolved image topic (:func:`~sepfm_ros.ros.msgs.headers.camera_info_topic`)."""
     own = image_base.rsplit("/", 1)[0] + "/" + CAMERA_INFO if "/" in image_base else CAMERA_INFO
     remapped = node.resolve_topic_name(own)
     if remapped != node.resolve_topic_name(own, only_expand=True):
         return remapped  # remapped by the user
-    return camera_info_beside(node.resolve_topic_name(image_base))
+    return camera_info_topic(node.resolve_topic_name(image_base))
 
 
 class CameraInfoInputs:
@@ -54,7 +56,7 @@ class CameraInfoInputs:
         self._lock = threading.Lock()
         self._latest: list[Any] = [None] * len(image_bases)
         self.received = 0
-        self.topics = [camera_info_topic(node, base) for base in image_bases]
+        self.topics = [node_camera_info_topic(node, base) for base in image_bases]
         self._subs = [
             InputSubscription(
                 node,

@@ -129,7 +129,7 @@ PARAMS: dict[str, ParamSpec] = {
     "images": ParamSpec(
         "auto",
         "what the images are, for camera_info: raw (pixels of K and D), rectified (pixels of P),"
-        " or auto (rectified when the image topic's name contains 'rect')",
+        " or auto (rectified when every input image topic's name contains 'rect')",
         choices=("auto", "raw", "rectified"),
         read_only=True,
     ),

@@ -36,7 +36,7 @@ from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.bags.results import gt_error_px, read_results
 from sepfm_ros.ros.msgs.image_conversion import ImageDecodeError, check_compressed, message_to_numpy
-from sepfm_ros.ros.offline.process import run_process
+from sepfm_ros.ros.offline.process import ProcessInputs, run_process
 from sepfm_ros.ros.session.parameters import parse_params
 from sepfm_ros.synthetic.sequences import pair_fundamental, stereo_sequence
 
@@ -146,8 +146,8 @@ def test_image_topics_without_leading_slash_find_their_camera_info(fmt, frames, 
         assert detect_inputs(reader, left=LEFT_TOPIC, right=RIGHT_TOPIC).topics == rel
         assert detect_inputs(reader, left=rel[0], right=rel[1]).topics == rel
     done, total = run_process(
-        bag, tmp_path / "out", parse_params(PARAMS), progress=False, left=LEFT_TOPIC,
-        right=RIGHT_TOPIC,
+        bag, tmp_path / "out", parse_params(PARAMS), ProcessInputs(left=LEFT_TOPIC,
+        right=RIGHT_TOPIC), progress=False,
     )  # fmt: skip
     assert done == total == N_FRAMES
     err = capsys.readouterr().err

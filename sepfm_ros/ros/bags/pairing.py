@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import bisect
 import sys
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -153,15 +153,25 @@ def paired_frames(
             yield Paired(out.pair[0], out.pair[1], pairing.resets, log_time)
 
 
+def warn_on_stderr(text: str) -> None:
+    """A warning on stderr, on a line of its own (past a progress bar)."""
+    print(f"\nwarning: {text}", file=sys.stderr, flush=True)
+
+
 def iter_pairs(
-    reader: BagReader, spec: InputSpec, session: Session, slop_ns: int | None = None
+    reader: BagReader,
+    spec: InputSpec,
+    session: Session,
+    slop_ns: int | None = None,
+    warn: Callable[[str], None] = warn_on_stderr,
 ) -> Iterator[PairJob]:
     """The pairs the node would form from the bag's input messages, in order.
 
     Pairing is the session's (:meth:`~sepfm_ros.ros.session.session.Session.pairing`): a frame
     whose stamp is not after its topic's newest is skipped, a jump back of more than
     ``stamp_jump_reset_s`` restarts the pairing. ``slop_ns`` overrides ``sync_slop_s`` (stereo),
-    see :func:`pairing_slop_ns`.
+    see :func:`pairing_slop_ns`. ``warn``: told once per topic of images read as packed rows
+    (step 0), as the node logs it.
     """
     msg_class = input_class(spec)
     zero_step = ZeroStepNotes()
@@ -172,7 +182,7 @@ def iter_pairs(
             if precheck(msg) is not None:  # as the node, skip unusable fields before pairing
                 continue
             if (note := zero_step.note(raw.topic, msg)) is not None:
-                print(f"\nsepfm_ros process: warning: {note}", file=sys.stderr, flush=True)
+                warn(note)
             yield raw.topic, stamp_ns(msg.header.stamp), msg, raw.log_time_ns
 
     stereo = spec.mode == "stereo"

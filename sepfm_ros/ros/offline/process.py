@@ -93,6 +93,11 @@ def _say(text: str) -> None:
     print(f"sepfm_ros process: {text}", file=sys.stderr, flush=True)
 
 
+def _warn(text: str) -> None:
+    """A warning while pairs are processed (on a line of its own, past the progress bar)."""
+    print(f"\nsepfm_ros process: warning: {text}", file=sys.stderr, flush=True)
+
+
 def open_bag_stream(
     reader: BagReader, params: dict[str, Any], choice: ProcessInputs, stop: Stop | None
 ) -> tuple[BagStream, int]:
@@ -114,6 +119,7 @@ def open_bag_stream(
         stream = BagStream.open(reader, spec, params, slop_ns)
     except ParameterError as err:
         raise BagError(str(err)) from None
+    stream.warn = _warn
     total = stream.pair_count(inputs)
     if total == 0:
         gap, flag = int(params["frame_gap"]), "-p sync_slop_s:=SECONDS"

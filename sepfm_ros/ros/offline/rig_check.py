@@ -90,6 +90,7 @@ def _open(reader: BagReader, req: CheckRequest, out: TextIO) -> tuple[BagStream,
     inputs = validate_inputs(reader, spec)
     slop_ns = stereo_slop_ns(spec, req.values, inputs.stamps[left], req.slop_given)
     stream = BagStream.open(reader, spec, {**req.values, "use_camera_info": True}, slop_ns, infos)
+    stream.warn = lambda text: print(f"warning: {text}", file=out)
     total = stream.pair_count(inputs)  # the node's pairing, run on the stamps
     if total == 0:
         raise BagError(inputs.no_pairs_reason(spec, 0, slop_ns, "-p sync_slop_s:=SECONDS"))

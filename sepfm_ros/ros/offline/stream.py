@@ -5,7 +5,7 @@ its pairs through it; nothing else in ``offline/`` builds a pipeline or answer s
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -17,6 +17,7 @@ from sepfm_ros.ros.bags.pairing import (
     iter_pairs,
     pairing_slop_ns,
     read_camera_infos,
+    warn_on_stderr,
 )
 from sepfm_ros.ros.bags.reader import BagReader
 from sepfm_ros.ros.msgs.headers import stamp_ns
@@ -34,6 +35,7 @@ class BagStream:
         session: the stream's session, built from the node's parameter values.
         slop_ns: the stereo pairing slop (None: ``sync_slop_s``; motion: unused).
         infos: the bag's camera_info of each camera, by stamp (None: none, or not used).
+        warn: told once per topic of images read as packed rows (step 0).
     """
 
     reader: Any
@@ -41,6 +43,7 @@ class BagStream:
     session: Session
     slop_ns: int | None
     infos: CameraInfos | None
+    warn: Callable[[str], None] = warn_on_stderr
 
     @classmethod
     def open(
@@ -62,7 +65,7 @@ class BagStream:
 
     def pairs(self) -> Iterator[PairJob]:
         """The pairs the node would form, in bag order (:func:`~..bags.pairing.iter_pairs`)."""
-        return iter_pairs(self.reader, self.spec, self.session, self.slop_ns)
+        return iter_pairs(self.reader, self.spec, self.session, self.slop_ns, self.warn)
 
     def pair_count(self, inputs: InputStamps) -> int:
         """How many pairs :meth:`pairs` gives, from the input stamps alone."""

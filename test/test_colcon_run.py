@@ -1,16 +1,21 @@
 """The ``ros2 run sepfm_ros node`` contract, without ros2cli (not on PyPI).
 
-``colcon build`` (colcon-core + colcon-ros from PyPI) builds both packages of the repository,
-sepfm_msgs (ament_cmake, against this environment's ROS wheels) and sepfm_ros, into a temporary
-workspace; colcon stops at the root package.xml, so the nested interface package is named with
-``--base-paths`` as README's workspace command does. The package prefix is looked up with
-ament_index_python exactly as ``ros2 run`` does, and ``<prefix>/lib/sepfm_ros/node`` is run from
-there (with the installed config file) until it publishes its /diagnostics report.
+The repository is put under ``src/`` of a temporary workspace (a symlink) and built as a ROS user
+does, with colcon-core + colcon-ros from PyPI. A plain ``colcon build`` builds sepfm_ros only:
+colcon stops at the root package.xml and never sees the nested interface package, so the built
+node's first start must fail with one line naming the fix, without a traceback (started where
+only a colcon-built sepfm_msgs could be imported, test_missing_interfaces.py). The command that
+line names is then run verbatim in the workspace and builds both packages, sepfm_msgs
+(ament_cmake, against this environment's ROS wheels) and sepfm_ros. The package prefix is looked
+up with ament_index_python exactly as ``ros2 run`` does, and ``<prefix>/lib/sepfm_ros/node`` is
+run from there (with the installed config file) until it publishes its /diagnostics report.
 """
 
 from __future__ import annotations
 
 import os
+import re
+import shlex
 import shutil
 import signal
 import subprocess
@@ -22,26 +27,76 @@ from pathlib import Path
 
 import pytest
 from optional_tools import missing_tool
+from test_missing_interfaces import without_pip_sepfm_msgs
 
 rclpy = pytest.importorskip("rclpy")
 
 REPO = Path(__file__).resolve().parent.parent
 
 
-@pytest.fixture(scope="module")
-def colcon_install(tmp_path_factory) -> Path:
+def _colcon() -> str:
     colcon = Path(sys.executable).parent / "colcon"
-    if not colcon.exists():
-        colcon = shutil.which("colcon")
-    if not colcon:
+    found = str(colcon) if colcon.exists() else shutil.which("colcon")
+    if not found:
         missing_tool("colcon", "pip install colcon-core colcon-ros, or pip install -e '.[test]'")
+    return str(found)
+
+
+def _user_env() -> dict[str, str]:
+    """This virtual environment activated, as the user who runs colcon has it."""
+    env = dict(os.environ)
+    env["VIRTUAL_ENV"] = sys.prefix  # CMake's FindPython3 takes the active environment's
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    return env
+
+
+@pytest.fixture(scope="module")
+def plain_build(tmp_path_factory) -> dict[str, object]:
+    """A plain ``colcon build`` of a workspace holding the repository as ``src/sepfm_ros``, and
+    the output of the built node's first start where sepfm_msgs is not importable."""
     ws = tmp_path_factory.mktemp("colcon_ws")
-    cmd = [str(colcon), "--log-base", str(ws / "log"), "build"]
-    cmd += ["--base-paths", str(REPO), str(REPO / "sepfm_msgs")]
-    cmd += ["--build-base", str(ws / "build"), "--install-base", str(ws / "install")]
-    # the interpreter whose ROS wheels sepfm_msgs builds against (a ROS machine's is found)
-    cmd += ["--cmake-args", f"-DPython3_EXECUTABLE={sys.executable}"]
-    done = subprocess.run(cmd, cwd=ws, capture_output=True, text=True, timeout=900)
+    (ws / "src").mkdir()
+    (ws / "src" / "sepfm_ros").symlink_to(REPO, target_is_directory=True)
+    env = _user_env()
+    done = subprocess.run(
+        [_colcon(), "build"], cwd=ws, env=env, capture_output=True, text=True, timeout=900
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    # sourced install/setup.sh (colcon-core's; setup.bash is colcon-bash's), then `ros2 run`
+    start = '. "$1/install/setup.sh" && exec "$1/install/sepfm_ros/lib/sepfm_ros/node"'
+    node = subprocess.run(
+        ["sh", "-c", start, "sh", str(ws)],
+        cwd=ws,
+        env=without_pip_sepfm_msgs(ws.parent / f"{ws.name}_hide", env),
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    return {"ws": ws, "build": done.stdout, "node": node}
+
+
+def test_plain_colcon_build_gives_a_node_that_names_the_fix_in_one_line(plain_build):
+    ws, build, node = plain_build["ws"], plain_build["build"], plain_build["node"]
+    assert "Finished <<< sepfm_ros" in build, build
+    assert "sepfm_msgs" not in build, build  # colcon did not look inside sepfm_ros's folder
+    output = node.stdout + node.stderr
+    assert node.returncode == 1, output
+    assert "Traceback" not in output, output
+    assert output.strip().count("\n") == 0, output  # one line
+    assert output.startswith("sepfm_ros: the interface package sepfm_msgs is not built"), output
+    assert f"`colcon build --base-paths src src/sepfm_ros/sepfm_msgs` in {ws}" in output, output
+
+
+@pytest.fixture(scope="module")
+def colcon_install(plain_build) -> Path:
+    """The workspace after the command the node's one line names, run there verbatim."""
+    ws, line = plain_build["ws"], plain_build["node"].stderr
+    fix = re.search(r"`(colcon build [^`]*)`", line)
+    assert fix, line
+    cmd = [_colcon(), *shlex.split(fix.group(1))[1:]]
+    done = subprocess.run(
+        cmd, cwd=ws, env=_user_env(), capture_output=True, text=True, timeout=1800
+    )
     assert done.returncode == 0, done.stdout + done.stderr
     assert "Finished <<< sepfm_msgs" in done.stdout, done.stdout
     assert "Finished <<< sepfm_ros" in done.stdout, done.stdout
@@ -54,7 +109,7 @@ def installed_env(install: Path) -> dict[str, str]:
     purelib = Path(sysconfig.get_path("purelib", vars={"base": str(prefix)}))
     rel = purelib.relative_to(prefix)
     site = prefix / rel
-    assert (site / "sepfm_ros" / "ros" / "node.py").is_file(), f"package not installed in {site}"
+    assert (site / "sepfm_ros" / "cli.py").is_file(), f"package not installed in {site}"
     env = dict(os.environ)
     env["AMENT_PREFIX_PATH"] = os.pathsep.join(
         [str(prefix), *filter(None, [os.environ.get("AMENT_PREFIX_PATH")])]

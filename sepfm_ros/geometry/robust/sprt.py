@@ -3,22 +3,11 @@ bail-out, as state shared by the arms of one run."""
 
 from __future__ import annotations
 
-from functools import lru_cache
-
 import numpy as np
 
 from sepfm_ros.geometry.robust.options import SamplingOptions
 
-__all__ = ["Sprt", "reading_order", "sprt_threshold"]
-
-
-@lru_cache(maxsize=64)
-def reading_order(n: int) -> np.ndarray:
-    """(n,) int64: the SPRT's fixed pseudo-random order of reading n points, the permutation of
-    a generator seeded with n. Cached (it depends on n alone; making the generator cost about
-    0.1 ms per estimate), so it is shared: never write to it. (It stays a writeable array: the
-    kernels that read it are compiled for writeable arrays.)"""
-    return np.random.default_rng(n).permutation(n).astype(np.int64)
+__all__ = ["Sprt", "sprt_threshold"]
 
 
 def sprt_threshold(
@@ -44,7 +33,7 @@ class Sprt:
         # a fixed pseudo-random reading order: the points come best first, and reading them in
         # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
         # the bail-out alone reproduces the plain run exactly
-        self.order = reading_order(n)
+        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
         self.delta = options.sprt_delta
         self.epsilon = 0.0
         self.A = np.inf

@@ -12,8 +12,10 @@ Sets (threshold 1 px, confidence 0.99):
 - ``shared``: ../shared/data/pairs.json at SIFT ratio 0.95.
 
 Printed per set and configuration: mean F-score against the GT positives, success % (median
-GT-positive error < 1 px and >= 20 positives recovered), median hypotheses, median ms per pair and
-median ms over USAC_MAGSAC's (same run).
+GT-positive error < 1 px and >= 20 positives recovered), median hypotheses, median ms per pair,
+median ms over USAC_MAGSAC's (same run), and the line search's median ms per pair (the separable
+methods' ``Estimate.timings_ms["lines"]``: Hough lines in both images and the ranked line pairs)
+and its share of the configuration's median ms.
 
     python benchmarks/bench_ablation.py [--sets lines,shared] [--step 4] [--seed 0]
         [--write-docs]
@@ -90,7 +92,7 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
     pairs = pairs[::step]
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", ratio))
     labels = [*CONFIGS, *ANCHORS]
-    rows: dict[str, list[tuple[bool, float, float, float]]] = {k: [] for k in labels}
+    rows: dict[str, list[tuple[bool, float, float, float, float]]] = {k: [] for k in labels}
     t0 = time.time()
     for i, pair in enumerate(pairs):
         m = cache.matches(pair)
@@ -105,13 +107,14 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
                 )  # fmt: skip
                 ms = 1e3 * (time.perf_counter() - t)
                 F, hyp = e.F, float(e.hypotheses)
+                lines_ms = float(e.timings_ms.get("lines", np.nan))
             else:
                 r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
-                F, ms = r.F, r.ms
+                F, ms, lines_ms = r.F, r.ms, np.nan
                 hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan
             met = run_metrics(F, m.pts_a, m.pts_b, pos, 1.0)
             ok = met.succeeded
-            rows[label].append((ok, met.f_score, hyp, ms))
+            rows[label].append((ok, met.f_score, hyp, ms, lines_ms))
         sys.stderr.write(f"\r  {manifest.parent.name}: {i + 1}/{len(pairs)} pairs, "
                          f"{time.time() - t0:.0f} s")  # fmt: skip
     sys.stderr.write("\n")
@@ -123,17 +126,22 @@ def table(rows: dict) -> str:
     magsac_ms = float(np.median([r[3] for r in rows["cv-magsac"]]))
     out = [
         "| configuration | F-score | success % | hypotheses (median) | ms (median) | "
-        "ms / USAC_MAGSAC |",
-        "|---|---|---|---|---|---|",
+        "ms / USAC_MAGSAC | line search ms per pair (median; share of ms) |",
+        "|---|---|---|---|---|---|---|",
     ]
     for label, rs in rows.items():
         r = np.array(rs, dtype=float)
         hyp = np.nanmedian(r[:, 2]) if np.isfinite(r[:, 2]).any() else np.nan
         name = f"{DEFAULT_METHOD} (default)" if label == "default" else label
+        ms = float(np.median(r[:, 3]))
+        lines = "n/a"
+        if np.isfinite(r[:, 4]).any():
+            lines_ms = float(np.nanmedian(r[:, 4]))
+            lines = f"{lines_ms:.2f} ({lines_ms / ms:.0%})"
         out.append(
             f"| {name} | {r[:, 1].mean():.3f} | {100 * r[:, 0].mean():.1f} | "
-            f"{'n/a' if np.isnan(hyp) else f'{hyp:.0f}'} | {np.median(r[:, 3]):.1f} | "
-            f"{np.median(r[:, 3]) / magsac_ms:.2f} |"
+            f"{'n/a' if np.isnan(hyp) else f'{hyp:.0f}'} | {ms:.1f} | "
+            f"{ms / magsac_ms:.2f} | {lines} |"
         )
     return "\n".join(out)
 

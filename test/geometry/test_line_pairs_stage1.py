@@ -328,3 +328,29 @@ def test_compiled_stage1_agrees_with_the_generic_ransac_loop(seed):
     need = trials_needed(3, int(np.count_nonzero(inl)), 60, 0.99, 200)
     assert need <= hyps and need <= sum(ref.samples)
     assert hyps <= 2 * need + 70 and sum(ref.samples) <= 2 * need + 70
+
+
+def test_find_line_pairs_equals_its_steps():
+    # find_line_pairs runs hough_lines, incidence and rank_line_pairs in two compiled calls:
+    # the same lines, in the same order, with the same supports as the steps one by one
+    from sepfm_ros.geometry.separable.line_pairs import find_line_pairs
+
+    compared = 0
+    for seed in range(8):
+        rng = np.random.default_rng(seed)
+        size1, size2 = (1024, 768), (800, 600)
+        pts1 = _points_with_lines(rng, size1, n_lines=6, n_rand=int(rng.integers(50, 300)))
+        pts2 = pts1 * 0.7 + rng.normal(0.0, 0.3, pts1.shape) + 20.0
+        opts = LineSearchOptions(hough_points=int(rng.integers(100, 400)))
+        got = find_line_pairs(pts1, pts2, size1, size2, opts)
+        m = min(len(pts1), opts.hough_points)
+        L1, L2 = hough_lines(pts1[:m], size1, opts), hough_lines(pts2[:m], size2, opts)
+        I1, I2 = incidence(pts1, L1, size1, opts), incidence(pts2, L2, size2, opts)
+        lines, supports = rank_line_pairs(I1, I2, opts.min_votes, opts.max_pairs)
+        assert len(got) == len(lines)
+        for pair, (i, j), sup in zip(got, lines, supports, strict=True):
+            assert np.array_equal(pair.line1, L1[i]) and np.array_equal(pair.line2, L2[j])
+            assert np.array_equal(pair.support, np.flatnonzero(sup))
+            assert pair.support.dtype == np.int64
+            compared += 1
+    assert compared >= 16  # the comparison saw many line pairs

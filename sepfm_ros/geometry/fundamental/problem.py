@@ -15,9 +15,10 @@ import numpy as np
 from sepfm_ros.geometry.epipolar import (
     apply_transform,
     denormalize_kernel,
+    distances_kernel,
+    homogeneous_columns,
     msac_kernel,
     sprt_msac_kernel,
-    symmetric_epipolar_distance,
 )
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.nonlinear import polish_local_optimization
@@ -163,8 +164,13 @@ class FundamentalProblem(Problem):
         self.f1 = np.zeros((0, 2)) if fixed1 is None else apply_transform(data.T1, fixed1)
         self.f2 = np.zeros((0, 2)) if fixed2 is None else apply_transform(data.T2, fixed2)
         self.f1, self.f2 = np.ascontiguousarray(self.f1), np.ascontiguousarray(self.f2)
+        #: the fixed correspondences as homogeneous pixel columns ((3, f), (3, f)) for
+        #: :meth:`fixed_inliers` (None without the check): made once, checked per best model
         self.fixed_px = (
-            (np.asarray(fixed1, dtype=np.float64), np.asarray(fixed2, dtype=np.float64))
+            (
+                homogeneous_columns(np.asarray(fixed1, dtype=np.float64)),
+                homogeneous_columns(np.asarray(fixed2, dtype=np.float64)),
+            )
             if f > 0 and fixed_tol > 0
             else None
         )
@@ -193,7 +199,8 @@ class FundamentalProblem(Problem):
         fixed points, or a wrong line pair)."""
         if self.fixed_px is None:
             return True
-        d = symmetric_epipolar_distance(model, *self.fixed_px)
+        F = np.ascontiguousarray(model, dtype=np.float64).reshape(1, 3, 3)
+        d = distances_kernel(F, *self.fixed_px)[0]  # symmetric_epipolar_distance's kernel
         return bool(np.all(d < self.fixed_tol))
 
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

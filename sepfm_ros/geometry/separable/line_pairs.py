@@ -76,19 +76,60 @@ def hough_lines(
     s = working_scale(image_size, opts.width)
     w = max(1, int(np.ceil(image_size[0] * s)))
     h = max(1, int(np.ceil(image_size[1] * s)))
-    xy = binary_image_pixels(np.ascontiguousarray(pts, dtype=np.float64), s, w, h)
-    if len(xy) == 0:
-        return np.zeros((0, 3))
-    # vote the points over the rho range the image can produce for theta in [0, pi):
-    # x cos + y sin in [-(w - 1), hypot(w, h)]
-    found = hough_point_set(
-        xy.reshape(-1, 2), int(opts.max_lines), int(opts.min_votes),
-        float(-w), float(np.ceil(np.hypot(w, h))), 1.0, 0.0, np.pi, np.pi / 180.0,
+    found = _hough_of_points(
+        np.ascontiguousarray(pts, dtype=np.float64), s, w, h, int(opts.max_lines),
+        int(opts.min_votes),
     )  # fmt: skip
+    return _lines_in_pixels(found, s)
+
+
+def _lines_in_pixels(found: np.ndarray, scale: float) -> np.ndarray:
+    """(L, 3) (votes, rho working px, theta rad) -> (L, 3) lines (cos, sin, -rho / scale) in
+    image px. (numpy's cos and sin, not a kernel's: the lines stay bit-identical.)"""
     if len(found) == 0:
         return np.zeros((0, 3))
-    rho, theta = found[:, 1], found[:, 2]  # (votes, rho, theta), strongest first
-    return np.stack([np.cos(theta), np.sin(theta), -rho / s], axis=1)
+    rho, theta = found[:, 1], found[:, 2]
+    return np.stack([np.cos(theta), np.sin(theta), -rho / scale], axis=1)
+
+
+@numba.njit(cache=True, nogil=True)
+def _hough_of_points(
+    pts: np.ndarray, scale: float, w: int, h: int, max_lines: int, min_votes: int
+) -> np.ndarray:
+    """Hough lines of the binary image of (N, 2) points at ``scale`` in a w x h image
+    (:func:`binary_image_pixels`, then :func:`hough_point_set` over the rho range the image
+    can produce for theta in [0, pi): x cos + y sin in [-(w - 1), hypot(w, h)]).
+
+    Returns:
+        (L, 3) (votes, rho working px, theta rad), strongest first, L <= max_lines.
+    """
+    xy = binary_image_pixels(pts, scale, w, h)
+    if xy.shape[0] == 0:
+        return np.zeros((0, 3))
+    return hough_point_set(
+        xy.reshape(-1, 2), max_lines, min_votes, float(-w), float(np.ceil(np.hypot(w, h))),
+        1.0, 0.0, np.pi, np.pi / 180.0,
+    )  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
+def _hough_of_both(
+    pts1: np.ndarray,
+    scale1: float,
+    w1: int,
+    h1: int,
+    pts2: np.ndarray,
+    scale2: float,
+    w2: int,
+    h2: int,
+    max_lines: int,
+    min_votes: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_hough_of_points` of image 1 and of image 2, in one call."""
+    return (
+        _hough_of_points(pts1, scale1, w1, h1, max_lines, min_votes),
+        _hough_of_points(pts2, scale2, w2, h2, max_lines, min_votes),
+    )
 
 
 @numba.njit(cache=True, nogil=True)
@@ -269,18 +310,64 @@ def find_line_pairs(
         pts1, pts2: (N, 2) matched points in pixels, best matches first.
     """
     opts = opts or LineSearchOptions()
-    m = min(len(pts1), opts.hough_points)
-    L1 = hough_lines(pts1[:m], image_size1, opts)
-    L2 = hough_lines(pts2[:m], image_size2, opts)
-    if len(L1) == 0 or len(L2) == 0:
+    p1 = np.ascontiguousarray(pts1, dtype=np.float64)
+    p2 = np.ascontiguousarray(pts2, dtype=np.float64)
+    m = min(len(p1), opts.hough_points)
+    # the steps of hough_lines, incidence and rank_line_pairs in two compiled calls (the
+    # Python between them was about a quarter of the search's time on SIFT pairs)
+    s1, s2 = working_scale(image_size1, opts.width), working_scale(image_size2, opts.width)
+    w1, h1 = max(1, int(np.ceil(image_size1[0] * s1))), max(1, int(np.ceil(image_size1[1] * s1)))
+    w2, h2 = max(1, int(np.ceil(image_size2[0] * s2))), max(1, int(np.ceil(image_size2[1] * s2)))
+    found1, found2 = _hough_of_both(
+        p1[:m], s1, w1, h1, p2[:m], s2, w2, h2, int(opts.max_lines), int(opts.min_votes)
+    )
+    if len(found1) == 0 or len(found2) == 0:
         return []
-    I1 = incidence(pts1, L1, image_size1, opts)
-    I2 = incidence(pts2, L2, image_size2, opts)
-    lines, supports = rank_line_pairs(I1, I2, int(opts.min_votes), int(opts.max_pairs))
+    L1, L2 = _lines_in_pixels(found1, s1), _lines_in_pixels(found2, s2)
+    lines, start, support = _rank_lines_of_points(
+        p1, L1, float(opts.distance) / s1, p2, L2, float(opts.distance) / s2,
+        int(opts.min_votes), int(opts.max_pairs),
+    )  # fmt: skip
     return [
-        LinePair(L1[i], L2[j], np.flatnonzero(sup))
-        for (i, j), sup in zip(lines, supports, strict=True)
+        LinePair(L1[i], L2[j], support[start[k] : start[k + 1]]) for k, (i, j) in enumerate(lines)
     ]
+
+
+@numba.njit(cache=True, nogil=True)
+def _rank_lines_of_points(
+    pts1: np.ndarray,
+    L1: np.ndarray,
+    dist1: float,
+    pts2: np.ndarray,
+    L2: np.ndarray,
+    dist2: float,
+    min_votes: int,
+    max_pairs: int,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`incidence` in both images and :func:`rank_line_pairs`, in one call.
+
+    Args:
+        pts1, pts2: (N, 2) px. L1: (K1, 3), L2: (K2, 3) lines in px. dist1, dist2: C in px of
+            each image.
+    Returns:
+        (P, 2) line indices (m, n); start (P + 1,) and support (S,): pair p's correspondences
+        (ascending) are ``support[start[p]:start[p + 1]]``.
+    """
+    I1 = _incidence(pts1, L1, dist1)
+    I2 = _incidence(pts2, L2, dist2)
+    lines, supports = rank_line_pairs(I1, I2, min_votes, max_pairs)
+    P, N = supports.shape
+    start = np.zeros(P + 1, dtype=np.int64)
+    for p in range(P):
+        start[p + 1] = start[p] + np.count_nonzero(supports[p])
+    support = np.empty(start[P], dtype=np.int64)
+    k = 0
+    for p in range(P):
+        for j in range(N):
+            if supports[p, j]:
+                support[k] = j
+                k += 1
+    return lines, start, support
 
 
 @numba.njit(cache=True, nogil=True)

@@ -112,9 +112,7 @@ def test_auto_subscription_switches_only_when_the_reliability_all_match_changes(
         assert sub.reliability == "reliable" and sub.switches == 2
         assert rec.created == ["reliable", "best_effort", "reliable"]
     finally:
-        sub._stop_following()
-        if sub.subscription is not None:
-            node.destroy_subscription(sub.subscription)
+        sub.destroy()
 
 
 def test_fixed_reliability_does_not_follow(ros):
@@ -129,7 +127,7 @@ def test_fixed_reliability_does_not_follow(ros):
         assert sub.reliability == "reliable" and sub.switches == 0 and rec.switched == []
         node.destroy_publisher(best_effort)
     finally:
-        node.destroy_subscription(sub.subscription)
+        sub.destroy()
 
 
 # --------------------------------------------------------------------------- the live node

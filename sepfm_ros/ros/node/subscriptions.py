@@ -201,6 +201,13 @@ class InputSubscription:
             return None
         return _reliability_name(self.subscription.qos_profile.reliability)
 
+    def destroy(self) -> None:
+        """Stop following the publishers and destroy the subscription."""
+        self._stop_following()
+        if self.subscription is not None:
+            self._node.destroy_subscription(self.subscription)
+            self.subscription = None
+
     def publisher_count(self) -> int:
         """Publishers matched by the subscription (0 before it exists)."""
         return 0 if self.subscription is None else self.subscription.get_publisher_count()

@@ -15,6 +15,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
+from rclpy.parameter import Parameter  # noqa: E402
 from rclpy.qos import QoSProfile, ReliabilityPolicy  # noqa: E402
 from ros_helpers import RELIABLE, image_msg, start_node  # noqa: E402
 from sensor_msgs.msg import Image  # noqa: E402
@@ -128,6 +129,43 @@ def test_fixed_reliability_does_not_follow(ros):
         node.destroy_publisher(best_effort)
     finally:
         sub.destroy()
+
+
+def test_auto_keeps_the_qos_overrides(ros):
+    """A depth override still applies after a switch; a reliability override stops the
+    following (the mismatch is reported as incompatible instead)."""
+    depth_topic, fixed_topic = "/qos_follow_depth/image_raw", "/qos_follow_fixed_rel/image_raw"
+    node = rclpy.create_node(
+        "qos_follow_overrides",
+        context=ros.context,
+        parameter_overrides=[
+            Parameter(f"qos_overrides.{depth_topic}.subscription.depth", value=3),
+            Parameter(f"qos_overrides.{fixed_topic}.subscription.reliability", value="reliable"),
+        ],
+    )
+    ros.executor.add_node(node)
+    depth_rec, fixed_rec = Recorder(), Recorder()
+    depth_sub = depth_rec.subscribe(node, depth_topic)
+    fixed_sub = fixed_rec.subscribe(node, fixed_topic)
+    pubs = []
+    try:
+        for topic in (depth_topic, fixed_topic):
+            pubs.append(ros.node.create_publisher(Image, topic, RELIABLE))
+        wait_for(lambda: depth_sub.reliability == "reliable" and fixed_sub.reliability)
+        assert depth_sub.subscription.qos_profile.depth == 3
+        for topic in (depth_topic, fixed_topic):
+            pubs.append(ros.node.create_publisher(Image, topic, BEST_EFFORT))
+        wait_for(lambda: depth_sub.reliability == "best_effort", what="switch to best effort")
+        assert depth_sub.subscription.qos_profile.depth == 3
+        wait_for(lambda: "reliability" in fixed_rec.incompatible, what="incompatible reported")
+        assert fixed_sub.reliability == "reliable" and fixed_rec.switched == []
+    finally:
+        depth_sub.destroy()
+        fixed_sub.destroy()
+        for pub in pubs:
+            ros.node.destroy_publisher(pub)
+        ros.executor.remove_node(node)
+        node.destroy_node()
 
 
 # --------------------------------------------------------------------------- the live node

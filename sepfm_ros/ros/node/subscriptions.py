@@ -41,7 +41,8 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 
 RELIABILITIES = ("auto", "reliable", "best_effort")
 INPUT_DEPTH = 10  # keep-last depth of an image subscription
-DISCOVERY_POLL_S = 0.1  # auto: how often to look at the topic's publishers
+DISCOVERY_POLL_S = 0.1  # auto: how often to look for the first publishers
+FOLLOW_POLL_S = 0.5  # auto: how often to look at the publishers once subscribed
 
 
 def input_topic(node: Node, base: str, transport: str) -> str:
@@ -112,6 +113,7 @@ class InputSubscription:
         self._requested: ReliabilityPolicy | None = None  # the policy asked for (auto follows)
         self.switches = 0  #: times ``auto`` recreated the subscription with another reliability
         self._timer = None
+        self._soon = None  # auto: a one-shot look at the publishers after an incompatible QoS
         if reliability == "auto":
             # polled on the node's executor, so subscriptions are created and destroyed on the
             # executor thread, between callbacks
@@ -136,6 +138,8 @@ class InputSubscription:
             self._create(wanted)
             if self._reliability_overridden():
                 self._stop_following()  # the user's qos_overrides fixed the reliability
+            elif self._timer is not None:
+                self._timer.timer_period_ns = int(FOLLOW_POLL_S * 1e9)
             return
         if wanted == self._requested:
             return
@@ -156,16 +160,29 @@ class InputSubscription:
         return name in getattr(self._node, "_parameter_overrides", {})
 
     def _stop_following(self) -> None:
-        if self._timer is not None:
-            self._timer.cancel()
-            self._node.destroy_timer(self._timer)
-            self._timer = None
+        for timer in (self._timer, self._soon):
+            if timer is not None:
+                timer.cancel()
+                self._node.destroy_timer(timer)
+        self._timer = self._soon = None
 
     def _incompatible(self, info: Any) -> None:
         policy = _policy_name(info.last_policy_kind)
         if policy == "reliability" and self._timer is not None:
-            return  # auto: the next look at the publishers switches to best effort
+            # auto: a best-effort publisher joined; look at the publishers at once (from a timer,
+            # not from this event of the subscription the look may destroy)
+            if self._soon is None:
+                self._soon = self._node.create_timer(0.0, self._look_now)
+            return
         self._on_incompatible(self.topic, policy)
+
+    def _look_now(self) -> None:
+        if self._soon is not None:
+            self._soon.cancel()
+            self._node.destroy_timer(self._soon)
+            self._soon = None
+        if self._timer is not None:
+            self._follow_publishers()
 
     def _create(
         self, policy: ReliabilityPolicy, overridable: tuple[QoSPolicyKind, ...] | None = None

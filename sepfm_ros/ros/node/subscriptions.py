@@ -13,7 +13,9 @@ receives what the publishers offer.
   (a best-effort publisher joins reliable ones, or the last best-effort one leaves), the
   subscription is destroyed and created again with it, and the switch is reported; it is not
   recreated otherwise (a publisher leaving the topic, or one joining with the same reliability,
-  changes nothing); a ``qos_overrides`` reliability stops it. ``reliable`` and ``best_effort``
+  changes nothing); a ``qos_overrides`` reliability stops it. The publishers are looked at
+  on the node's executor, every ``FOLLOW_POLL_S`` and at once when the subscription reports a
+  publisher of incompatible reliability. ``reliable`` and ``best_effort``
   subscribe at once with that policy. Keep-last with a small depth, so the node works on the
   newest frames; the ``qos_overrides./<topic>.subscription.*`` parameters still override every
   policy.

@@ -170,6 +170,7 @@ class RectifyNode(Node):
                 on_lost=self._on_lost,
                 on_incompatible=self._on_incompatible,
                 on_created=lambda topic, rel: self.get_logger().info(f"{topic}: {rel}"),
+                on_switched=self._on_qos_switch,
             )
             for base, side in (("left/image_raw", LEFT), ("right/image_raw", RIGHT))
         ]
@@ -208,6 +209,13 @@ class RectifyNode(Node):
     @guarded
     def _on_incompatible(self, topic: str, policy: str) -> None:
         self._problem("incompatible_qos", f"a publisher of {topic} has an incompatible {policy}")
+
+    @guarded
+    def _on_qos_switch(self, topic: str, old: str, new: str) -> None:
+        """input_reliability auto recreated the subscription of ``topic`` with ``new``."""
+        self.count("input_qos_switches")
+        self.count(f"input_qos_switches_to_{new}")
+        self.get_logger().info(f"the publishers of {topic} changed: {old} -> {new}")
 
     # ---------------------------------------------------------------- estimates
     @guarded

@@ -25,6 +25,7 @@ from __future__ import annotations
 
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, cast
@@ -132,6 +133,7 @@ class SepfmNode(Node):
 
         self._out = NodeOutputs(self)
 
+        self._qos_switches: Counter[str] = Counter()  # input_reliability auto, by new reliability
         inputs = self._input_callbacks()
         self._subs = self._input_subscriptions(inputs, values["input_reliability"])
         bases = [base for base, _ in inputs]
@@ -197,6 +199,7 @@ class SepfmNode(Node):
                 on_lost=self._on_lost,
                 on_incompatible=self._on_incompatible,
                 on_created=self._on_subscribed,
+                on_switched=self._on_qos_switch,
             )
             for base, callback in inputs
         ]
@@ -274,6 +277,16 @@ class SepfmNode(Node):
     @guarded
     def _on_subscribed(self, topic: str, reliability: str) -> None:
         self.get_logger().info(f"subscribed to {topic} ({reliability})")
+
+    @guarded
+    def _on_qos_switch(self, topic: str, old: str, new: str) -> None:
+        """input_reliability auto recreated the subscription of ``topic`` with ``new``."""
+        with self._lock:
+            self._qos_switches[new] += 1
+        self.get_logger().info(
+            f"the publishers of {topic} changed: subscription switched from {old} to {new}, "
+            "the reliability all of them match"
+        )
 
     def _precheck(self, msg: Any, topic: str) -> bool:
         """Cheap field validation in the callback (no pixel access); False when skipped."""
@@ -473,6 +486,12 @@ class SepfmNode(Node):
         values["input_publishers"] = min(s.publisher_count() for s in self._subs)
         for sub, name in zip(self._subs, self._health.topics, strict=True):
             values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
+        # input_reliability auto: subscriptions recreated for a change of the publishers, by kind
+        with self._lock:
+            switches = dict(self._qos_switches)
+        values["input_qos_switches"] = sum(switches.values())
+        for kind in ("best_effort", "reliable"):
+            values[f"input_qos_switches_to_{kind}"] = switches.get(kind, 0)
         values["dds_input_transport"] = self._dds.describe()
         if self._camera_info is not None:
             # 1 once every camera's camera_info has arrived (a player can wait for it before the

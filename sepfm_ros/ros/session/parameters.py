@@ -66,7 +66,8 @@ PARAMS: dict[str, ParamSpec] = {
     "input_reliability": ParamSpec(
         "auto",
         "QoS reliability of the image subscriptions: auto = what the publishers offer (reliable"
-        " when all of them publish reliable), reliable, or best_effort",
+        " when all of them publish reliable; followed when they change, each switch counted in"
+        " /diagnostics), reliable, or best_effort",
         choices=("auto", "reliable", "best_effort"),
         read_only=True,
     ),

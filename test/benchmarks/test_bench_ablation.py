@@ -24,13 +24,16 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
     labels = [f"{DEFAULT_METHOD} (default)"] + [k for k in bench_ablation.CONFIGS if k != "default"]
     labels += bench_ablation.ANCHORS
     for label in labels:
-        row = re.search(rf"^\| {re.escape(label)} \| (\S+) \| (\S+) \| (\S+) \| (\S+) \| (\S+) \|$",
-                        out, re.M)  # fmt: skip
+        row = re.search(rf"^\| {re.escape(label)} \| (\S+) \| (\S+) \| (\S+) \| (\S+) \| (\S+) "
+                        r"\| ([^|]+) \|$", out, re.M)  # fmt: skip
         assert row, label
         f, success = float(row.group(1)), float(row.group(2))
         assert 0.0 <= f <= 1.0 and 0.0 <= success <= 100.0
         assert float(row.group(4)) > 0
-    assert re.search(r"^\| cv-magsac \| .* \| 1\.00 \|$", out, re.M)
+        lines = re.fullmatch(r"(\d+\.\d\d) \((\d+)%\)", row.group(6))
+        if label.startswith(DEFAULT_METHOD):  # the line search's cost per pair and its share
+            assert lines and float(lines.group(1)) > 0 and 0 < int(lines.group(2)) <= 100, row[0]
+    assert re.search(r"^\| cv-magsac \| .* \| 1\.00 \| n/a \|$", out, re.M)
     body = bench_docs.read_block(doc.read_text(), "bench_ablation")
     assert body.startswith(f"## Ablation of the default method ({DEFAULT_METHOD})")
     assert "Not generated yet" in bench_docs.read_block(doc.read_text(), "bench_estimators")

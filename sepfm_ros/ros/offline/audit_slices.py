@@ -34,13 +34,12 @@ from sepfm_ros.ros.bags.inputs import InputSpec, detect_inputs
 from sepfm_ros.ros.bags.pairing import (
     PairJob,
     expected_pairs,
-    pairing_slop_ns,
 )
 from sepfm_ros.ros.bags.reader import BagReader, RawMessage
 from sepfm_ros.ros.bags.types import CAMERA_INFO, header_stamp_ns
 from sepfm_ros.ros.msgs.diagnostics import status_values
 from sepfm_ros.ros.msgs.headers import stamp_ns
-from sepfm_ros.ros.offline.stream import BagStream
+from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 from sepfm_ros.ros.session.answer import (
     PairAnswer,
 )
@@ -120,9 +119,7 @@ def inspect_bag(bag: str, params: dict[str, Any], choice: InputChoice) -> Any:
             stamps = _first_stamps(reader, spec.topics[0])
             steps = sorted(b - a for a, b in zip(stamps, stamps[1:], strict=False) if b > a)
             period = steps[len(steps) // 2] if steps else 100_000_000
-            slop = None
-            if spec.mode == "stereo":
-                slop = pairing_slop_ns(params, stamps, choice.slop_given)
+            slop = stereo_slop_ns(spec, params, stamps, choice.slop_given)
             infos = spec.camera_info_topics()
             cameras = tuple(_camera(reader, t, i) for t, i in zip(spec.topics, infos, strict=True))
             calibrated = (

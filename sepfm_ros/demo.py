@@ -395,12 +395,9 @@ def write_debug_image(live_bag: Path, stamp_ns: int, path: Path) -> bool:
 def calibration_summary(live_bag: Path, results: list) -> str | None:
     """One line on the calibrated outputs (camera_info in the bag): the median relative pose
     of the answered pairs and the node's last calibration check; None without them."""
-    from diagnostic_msgs.msg import DiagnosticStatus
-    from rclpy.serialization import deserialize_message
-
     from sepfm_msgs.msg import TwoViewEstimate
     from sepfm_ros.geometry.calibrated.calibration_check import LEVEL_NAMES
-    from sepfm_ros.ros.bags.results import calibrated_topics
+    from sepfm_ros.ros.bags.results import read_calibration_checks
 
     poses = [
         r.estimate
@@ -421,15 +418,10 @@ def calibration_summary(live_bag: Path, results: list) -> str | None:
     )
     if poses[-1].pose_kind == TwoViewEstimate.POSE_METRIC:
         line += f", baseline {float(np.linalg.norm(translations[-1])):.3f} m"
-    topic = calibrated_topics()["calibration_check"]
-    with BagReader(live_bag) as reader:
-        if topic in reader.topics:
-            last = None
-            for raw in reader.messages([topic]):
-                last = deserialize_message(raw.data, DiagnosticStatus)
-            if last is not None:
-                level = LEVEL_NAMES[last.level[0]]
-                line += f"; calibration check {level}: {last.message}"
+    checks = read_calibration_checks(live_bag)
+    if checks:
+        last = checks[-1].status
+        line += f"; calibration check {LEVEL_NAMES[last.level[0]]}: {last.message}"
     return line
 
 

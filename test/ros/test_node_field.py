@@ -120,7 +120,7 @@ def test_default_qos_colour_camera_every_pair_answered_then_stamps_jump_back(
         "-r",
         "image_raw:=/robot/camera/image_raw",
         "-p",
-        "diagnostics_period_s:=0.5",
+        "diagnostic_updater.period:=0.5",
         input_qos=DEFAULT_QOS,
     )
     try:
@@ -246,7 +246,7 @@ def test_best_effort_colour_camera_every_pair_answered(ros, tmp_path, images, sh
         "-r",
         "image_raw:=/be_colour/image_raw",
         "-p",
-        "diagnostics_period_s:=0.5",
+        "diagnostic_updater.period:=0.5",
         input_qos=qos_profile_sensor_data,
         env=USER_DISCOVERY,
     )
@@ -325,7 +325,7 @@ def test_localhost_range_best_effort_loss_is_counted_with_its_fix(ros, tmp_path,
         "-r",
         "image_raw:=/be_local/image_raw",
         "-p",
-        "diagnostics_period_s:=0.5",
+        "diagnostic_updater.period:=0.5",
         input_qos=qos_profile_sensor_data,
         env={"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"},
     )
@@ -402,7 +402,7 @@ def test_lagging_right_camera_warns_with_offset_then_pairs_nearest(
         "-r",
         "right/image_raw:=/lag/right/image_raw",
         "-p",
-        "diagnostics_period_s:=0.25",
+        "diagnostic_updater.period:=0.25",
         input_qos=DEFAULT_QOS,
     )
     lag = 12_000_000

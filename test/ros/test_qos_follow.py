@@ -224,7 +224,7 @@ def test_node_auto_follows_a_best_effort_publisher_joining_and_leaving(ros, tmp_
         "-r",
         f"image_raw:={topic}",
         "-p",
-        "diagnostics_period_s:=0.5",
+        "diagnostic_updater.period:=0.5",
         input_qos=RELIABLE,
     )
     best_effort = None

@@ -140,7 +140,7 @@ def test_rectifier_over_dds(rotated_pair, ros_domain_id, tmp_path):
         "matches": ros.node.create_publisher(MatchArray, "/sepfm/matches", RELIABLE),
     }
     proc = NodeProcess(
-        NAME, tmp_path, "-p", "diagnostics_period_s:=0.2",
+        NAME, tmp_path, "-p", "diagnostic_updater.period:=0.2",
         "-r", "left/image_raw:=/cam/left/image_raw", "-r", "right/image_raw:=/cam/right/image_raw",
         "-r", "left/image_rect:=/left/image_rect", "-r", "right/image_rect:=/right/image_rect",
         command="rectify",
@@ -234,7 +234,7 @@ def test_rectifier_behind_the_sepfm_node(rotated_pair, ros_domain_id, tmp_path):
               "-r", "right/image_raw:=/cam/right/image_raw")  # fmt: skip
     node = NodeProcess("sepfm_e2e", tmp_path, "-p", "mode:=stereo", *inputs)
     rect = NodeProcess(
-        NAME, tmp_path, *inputs, "-p", "diagnostics_period_s:=0.2",
+        NAME, tmp_path, *inputs, "-p", "diagnostic_updater.period:=0.2",
         "-r", "sepfm/estimate:=/sepfm_e2e/estimate", "-r", "sepfm/matches:=/sepfm_e2e/matches",
         "-r", "left/image_rect:=/left/image_rect", "-r", "right/image_rect:=/right/image_rect",
         command="rectify",

@@ -1,11 +1,11 @@
 """Read the node's outputs back from a bag and score them against the bag's ground truth.
 
-Used by ``process`` (its summary), ``demo`` (the per-frame table) and the replay tests (live vs
-offline). The node's answers are typed (``sepfm_msgs/TwoViewEstimate`` on ``~/estimate``,
-``sepfm_msgs/MatchArray`` on ``~/matches``). The error against ground truth is the one of the
-node tests and the evaluation: the median symmetric epipolar distance, under the estimated F, of
-the matches that are within ``GT_INLIER_PX`` (1 px) of the ground-truth F ("positives", from
-``~/matches``).
+Used by ``process`` (its summary), ``demo`` (the per-frame table and the calibration check) and
+the replay tests (live vs offline). The node's answers are typed (``sepfm_msgs/TwoViewEstimate``
+on ``~/estimate``, ``sepfm_msgs/MatchArray`` on ``~/matches``). The error against ground truth
+is the one of the node tests and the evaluation: the median symmetric epipolar distance, under
+the estimated F, of the matches that are within ``GT_INLIER_PX`` (1 px) of the ground-truth F
+("positives", from ``~/matches``).
 """
 
 from __future__ import annotations
@@ -15,13 +15,20 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import Image
 
 from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.geometry import symmetric_epipolar_distance
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.bags.types import GROUND_TRUTH_TOPIC, format_stamp
+from sepfm_ros.ros.bags.types import (
+    DIAGNOSTIC_ARRAY,
+    DIAGNOSTIC_STATUS,
+    GROUND_TRUTH_TOPIC,
+    format_stamp,
+)
+from sepfm_ros.ros.msgs.calibration import calibration_check_statuses
 from sepfm_ros.ros.msgs.fundamental import fundamental_from_image, fundamental_from_msg
 from sepfm_ros.ros.msgs.headers import stamp_ns
 
@@ -45,6 +52,37 @@ def calibrated_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
         "relative_transform": f"{ns}/relative_transform",
         "calibration_check": f"{ns}/calibration_check",
     }
+
+
+@dataclass(frozen=True)
+class CalibrationCheck:
+    """One ``~/calibration_check`` message of a bag: its pair's stamp (ns; None in a bag of
+    sepfm_ros 0.1.0, whose bare DiagnosticStatus had no header), log time (ns) and status."""
+
+    stamp_ns: int | None
+    log_time_ns: int
+    status: DiagnosticStatus
+
+
+def read_calibration_checks(
+    bag: str | Path, namespace: str = OUTPUT_NAMESPACE
+) -> list[CalibrationCheck]:
+    """The calibration checks in ``bag`` (written by ``process`` or recorded from the node), in
+    log-time order; empty without the topic. Reads both types the topic has had: the stamped
+    ``diagnostic_msgs/DiagnosticArray`` and the bare ``DiagnosticStatus`` of sepfm_ros 0.1.0."""
+    topic = calibrated_topics(namespace)["calibration_check"]
+    out: list[CalibrationCheck] = []
+    with BagReader(bag) as reader:
+        if topic not in reader.topics:
+            return out
+        info = reader.require(topic, (DIAGNOSTIC_ARRAY, DIAGNOSTIC_STATUS))
+        stamped = info.msgtype == DIAGNOSTIC_ARRAY
+        for raw in reader.messages([topic]):
+            msg = deserialize_message(raw.data, DiagnosticArray if stamped else DiagnosticStatus)
+            stamp = stamp_ns(msg.header.stamp) if stamped else None
+            for status in calibration_check_statuses(msg):
+                out.append(CalibrationCheck(stamp, raw.log_time_ns, status))
+    return out
 
 
 def gt_error_px(F: np.ndarray, F_gt: np.ndarray, pts_a: np.ndarray, pts_b: np.ndarray) -> float:

@@ -5,14 +5,19 @@
   the reason).
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
-- :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``.
+- :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``
+  named ``<node FQN>: calibration``.
+- :func:`calibration_check_message`: that status stamped with its pair's header, as the
+  ``diagnostic_msgs/DiagnosticArray`` of ``~/calibration_check``.
+- :func:`calibration_check_statuses`: the statuses of a ``~/calibration_check`` message of either
+  type (the DiagnosticArray, or the bare DiagnosticStatus that sepfm_ros 0.1.0 wrote), for readers.
 """
 
 from __future__ import annotations
 
 from typing import Any
 
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
@@ -20,10 +25,10 @@ from std_msgs.msg import Header
 from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
 from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
-from sepfm_ros.ros.msgs.diagnostics import health_status
+from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, status_name
 from sepfm_ros.ros.msgs.headers import copy_header
 
-CALIBRATION_STATUS_SUFFIX = ": calibration"
+CALIBRATION_TASK = "calibration"
 
 
 def camera_model_from_info(msg: Any, image_size: tuple[int, int] | None = None) -> CameraModel:
@@ -75,11 +80,11 @@ def relative_transform(
 
 
 def calibration_status(
-    status: CalibrationStatus, node_name: str, hardware_id: str = ""
+    status: CalibrationStatus, node_fqn: str, hardware_id: str = ""
 ) -> DiagnosticStatus:
-    """The stereo calibration check as ``DiagnosticStatus`` named ``<node>: calibration``."""
+    """The stereo calibration check as ``DiagnosticStatus`` named ``<node FQN>: calibration``."""
     return health_status(
-        node_name + CALIBRATION_STATUS_SUFFIX,
+        status_name(node_fqn, CALIBRATION_TASK),
         bytes([status.level]),
         status.message,
         status.values,
@@ -88,13 +93,28 @@ def calibration_status(
 
 
 def calibration_error_status(
-    error: CalibrationError, node_name: str, hardware_id: str = ""
+    error: CalibrationError, node_fqn: str, hardware_id: str = ""
 ) -> DiagnosticStatus:
     """ERROR status for unusable calibration input; the node keeps estimating F without it."""
     return health_status(
-        node_name + CALIBRATION_STATUS_SUFFIX,
+        status_name(node_fqn, CALIBRATION_TASK),
         DiagnosticStatus.ERROR,
         f"camera_info unusable, estimating without calibration: {error}",
         {},
         hardware_id,
     )
+
+
+def calibration_check_message(header: Header, status: DiagnosticStatus) -> DiagnosticArray:
+    """``~/calibration_check``: the check's ``status`` for one pair, stamped with the pair's
+    ``header`` (copied: the left or current image's stamp, camera a's frame id), so a consumer
+    knows which pair the decision includes, as for ``~/estimate``."""
+    return diagnostic_array(header, [status])
+
+
+def calibration_check_statuses(msg: DiagnosticArray | DiagnosticStatus) -> list[DiagnosticStatus]:
+    """The statuses of a ``~/calibration_check`` message of either type: a DiagnosticArray's
+    statuses, or a bare DiagnosticStatus (as sepfm_ros 0.1.0 published and wrote it) alone."""
+    if isinstance(msg, DiagnosticArray):
+        return list(msg.status)
+    return [msg]

@@ -1,4 +1,10 @@
-"""diagnostic_msgs helpers: key/value lists, a status from named values, the array."""
+"""diagnostic_msgs helpers: key/value lists, a status from named values, the array, and the
+names of statuses.
+
+Status names follow diagnostic_updater's ``"<node>: <task>"``, with the node's fully qualified
+name (``/rig_a/sepfm: node``) where diagnostic_updater has the bare node name: two nodes of the
+same name in different namespaces (the rigs launch) then report under different names.
+"""
 
 from __future__ import annotations
 
@@ -21,6 +27,12 @@ def _fmt(value: Any) -> str:
 def key_values(values: Mapping[str, Any]) -> list[KeyValue]:
     """name -> value as diagnostic_msgs/KeyValue (floats with 6 significant digits)."""
     return [KeyValue(key=str(k), value=_fmt(v)) for k, v in values.items()]
+
+
+def status_name(node_fqn: str, task: str) -> str:
+    """The name of a status of task ``task`` of the node ``node_fqn`` (fully qualified, e.g.
+    ``/rig_a/sepfm``): ``"/rig_a/sepfm: calibration"``."""
+    return f"{node_fqn}: {task}"
 
 
 def health_status(

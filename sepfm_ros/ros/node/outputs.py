@@ -33,7 +33,7 @@ class NodeOutputs:
         self.debug = node.create_publisher(Image, "~/debug_image", reliable)
         self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
         self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
-        self.calibration = node.create_publisher(DiagnosticStatus, "~/calibration_check", reliable)
+        self.calibration = node.create_publisher(DiagnosticArray, "~/calibration_check", reliable)
 
     def answer(
         self,
@@ -48,8 +48,9 @@ class NodeOutputs:
         t0 = time.perf_counter()
         if answer.transform is not None:
             self.pose.publish(answer.transform)
-        if answer.calibration is not None:
-            self.calibration.publish(answer.calibration)
+        calibration_check = answer.calibration_check()
+        if calibration_check is not None:
+            self.calibration.publish(calibration_check)
         self.matches.publish(answer.matches)
         publish_ms = (time.perf_counter() - t0) * 1e3
         add_timings(answer.estimate, {"publish": publish_ms})

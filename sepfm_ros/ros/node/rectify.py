@@ -27,6 +27,7 @@ from sepfm_ros.pipeline.rectification import (
 from sepfm_ros.ros.msgs.diagnostics import (
     diagnostic_array,
     health_status,
+    status_name,
 )
 from sepfm_ros.ros.msgs.fundamental import (
     fundamental_from_msg,
@@ -41,8 +42,14 @@ from sepfm_ros.ros.msgs.image_conversion import (
 from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
+from sepfm_ros.ros.session.parameters import (
+    DIAGNOSTIC_PERIOD,
+    ParamSpec,
+    adopt_renamed,
+    descriptor,
+    parameter_error,
+)
 from sepfm_ros.ros.session.parameters import PARAMS as NODE_PARAMS
-from sepfm_ros.ros.session.parameters import ParamSpec, descriptor, parameter_error
 from sepfm_ros.stream.pairing import Frame, StereoPairing
 from sepfm_ros.stream.sync import LEFT, RIGHT
 
@@ -77,7 +84,7 @@ _PARAMS: dict[str, ParamSpec] = {
         0.0,
         1.0,
     ),
-    "diagnostics_period_s": ParamSpec(1.0, "period of the /diagnostics report, s", 0.1, 60.0),
+    DIAGNOSTIC_PERIOD: ParamSpec(1.0, "period of the /diagnostics report, s", 0.1, 60.0),
 }
 
 
@@ -132,6 +139,8 @@ class RectifyNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
+        for text in adopt_renamed(self._parameter_overrides):  # an old name given: warn, use it
+            self.get_logger().warning(text)
         for name, spec in PARAMS.items():
             self.declare_parameter(name, spec.default, descriptor(name, spec))
         self._values = {name: self.get_parameter(name).value for name in PARAMS}
@@ -176,7 +185,7 @@ class RectifyNode(Node):
         ]
         self.create_subscription(TwoViewEstimate, "sepfm/estimate", self._on_estimate, reliable)
         self.create_subscription(MatchArray, "sepfm/matches", self._on_matches, reliable)
-        self.create_timer(float(self._values["diagnostics_period_s"]), self._report)
+        self.create_timer(float(self._values[DIAGNOSTIC_PERIOD]), self._report)
         self.get_logger().info(
             f"rectifying {', '.join(s.topic for s in self._subs)} with the estimates of "
             f"{self.resolve_topic_name('sepfm/estimate')} into "
@@ -305,6 +314,7 @@ class RectifyNode(Node):
             level, text = DiagnosticStatus.WARN, "waiting for a good estimate"
         else:
             level, text = DiagnosticStatus.OK, f"rectifying ({rect.inliers} inliers)"
-        status = health_status(f"{self.get_name()}: rectify", level, text, values)
+        name = status_name(self.get_fully_qualified_name(), "rectify")
+        status = health_status(name, level, text, values, self.get_fully_qualified_name())
         header = Header(stamp=self.get_clock().now().to_msg())
         self._diagnostics.publish(diagnostic_array(header, [status]))

@@ -42,7 +42,7 @@ from sepfm_ros.pipeline.pipeline import (
     MatchedPair,
     name_native_thread,
 )
-from sepfm_ros.ros.msgs.diagnostics import health_status
+from sepfm_ros.ros.msgs.diagnostics import health_status, status_name
 from sepfm_ros.ros.msgs.headers import copy_header, stamp_ns
 from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.node.camera_info import CameraInfoInputs
@@ -63,8 +63,10 @@ from sepfm_ros.ros.session.answer import (
 )
 from sepfm_ros.ros.session.calibrated import CamerasUpdate
 from sepfm_ros.ros.session.parameters import (
+    DIAGNOSTIC_PERIOD,
     NODE_NAME,
     PARAMS,
+    adopt_renamed,
     change_errors,
     descriptor,
     parameter_error,
@@ -141,7 +143,7 @@ class SepfmNode(Node):
             values,
             self._mode == "stereo",
             [self.resolve_topic_name(b) for b in bases],
-            self.get_name(),
+            self.get_fully_qualified_name(),
             self.get_fully_qualified_name(),
             cache_size=8,
             parallel_detect=True,
@@ -151,7 +153,7 @@ class SepfmNode(Node):
         self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
         self.add_on_set_parameters_callback(self._validate_parameters)
         self.add_post_set_parameters_callback(self._apply_parameters)
-        self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
+        self._diag_timer = self.create_timer(values[DIAGNOSTIC_PERIOD], self._report_health)
         self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
         self._workers = [
             threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
@@ -167,6 +169,8 @@ class SepfmNode(Node):
 
     def _declare_parameters(self) -> dict[str, Any]:
         """Declare every parameter; their values (ValueError listing the invalid ones)."""
+        for text in adopt_renamed(self._parameter_overrides):  # an old name given: warn, use it
+            self.get_logger().warning(text)
         for name, spec in PARAMS.items():
             self.declare_parameter(name, spec.default, descriptor(name, spec))
         values = self._param_values()
@@ -525,7 +529,7 @@ class SepfmNode(Node):
         level, message = self._health.level(stall)
         self._reported_stall = stall
         status = health_status(
-            f"{self.get_name()}: node",
+            status_name(self.get_fully_qualified_name(), "node"),
             LEVEL_BYTES[level],
             message,
             values,

@@ -34,7 +34,7 @@ from sepfm_ros.ros.bags.results import (
     output_topics,
 )
 from sepfm_ros.ros.bags.types import (
-    DIAGNOSTIC_STATUS,
+    DIAGNOSTIC_ARRAY,
     GROUND_TRUTH_TOPIC,
     IMAGE,
     MATCH_ARRAY,
@@ -142,7 +142,7 @@ def _output_topics(
     if stream.infos is not None:
         topics = {**topics, **calibrated_topics(namespace)}
         writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
-        writer.add_topic(topics["calibration_check"], DIAGNOSTIC_STATUS, (OUTPUT_QOS,))
+        writer.add_topic(topics["calibration_check"], DIAGNOSTIC_ARRAY, (OUTPUT_QOS,))
     if GROUND_TRUTH_TOPIC in reader.topics:
         reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
         writer.add_topic(GROUND_TRUTH_TOPIC, IMAGE, reader.topics[GROUND_TRUTH_TOPIC].qos)
@@ -224,8 +224,9 @@ def process_pair(
     out = []
     if answer.transform is not None:
         out.append((topics["relative_transform"], serialize_message(answer.transform)))
-    if answer.calibration is not None:
-        out.append((topics["calibration_check"], serialize_message(answer.calibration)))
+    calibration_check = answer.calibration_check()
+    if calibration_check is not None:
+        out.append((topics["calibration_check"], serialize_message(calibration_check)))
     out.append((topics["matches"], serialize_message(answer.matches)))
     out.append((topics["estimate"], serialize_message(answer.estimate)))
     return out

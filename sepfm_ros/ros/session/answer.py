@@ -11,9 +11,10 @@ same answer for the same pair; nothing else composes outputs. A pair's answer
   the estimator refused are ``STATUS_BAD_INPUT`` of kind ``estimator_input``, with their counts;
 - ``sepfm_msgs/MatchArray`` (``~/matches``): every match (none in a failure record);
 - with camera_info: the ``geometry_msgs/TransformStamped`` pose (``~/relative_transform``) when
-  usable, and the calibration check's ``diagnostic_msgs/DiagnosticStatus``
-  (``~/calibration_check``) of a calibrated stereo rig, or the ERROR status of unusable
-  camera_info.
+  usable, and the calibration check's ``diagnostic_msgs/DiagnosticStatus`` of a calibrated
+  stereo rig, or the ERROR status of unusable camera_info, which ``~/calibration_check``
+  carries in a ``diagnostic_msgs/DiagnosticArray`` stamped with the pair's header
+  (:meth:`PairAnswer.calibration_check`).
 
 Before pairing, :func:`precheck` skips an input message whose fields are unusable (the node in
 its callback, ``process`` as it reads the bag). The steps of a pair, for callers that split
@@ -38,7 +39,7 @@ from dataclasses import dataclass
 
 import numpy as np
 from builtin_interfaces.msg import Time
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import Quaternion, Transform, TransformStamped
 from std_msgs.msg import Header
 
@@ -46,7 +47,7 @@ from sepfm_msgs.msg import Match, MatchArray, StageTiming, TwoViewEstimate
 from sepfm_ros.geometry.estimate import StatusCode
 from sepfm_ros.pipeline.calibration import CalibratedOutputs
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig, PipelineResult
-from sepfm_ros.ros.msgs.calibration import relative_transform
+from sepfm_ros.ros.msgs.calibration import calibration_check_message, relative_transform
 from sepfm_ros.ros.msgs.fundamental import fundamental_field
 from sepfm_ros.ros.msgs.headers import copy_header
 from sepfm_ros.ros.msgs.image_conversion import (
@@ -149,6 +150,13 @@ class PairAnswer:
     @property
     def has_f(self) -> bool:
         return bool(self.estimate.has_f)
+
+    def calibration_check(self) -> DiagnosticArray | None:
+        """The ``~/calibration_check`` message: ``calibration`` stamped with the pair's header
+        (the estimate's); None without a calibration status."""
+        if self.calibration is None:
+            return None
+        return calibration_check_message(self.estimate.header, self.calibration)
 
 
 def precheck(msg: Any) -> BadInput | None:

@@ -62,7 +62,8 @@ class CalibratedStream:
         stereo: two cameras of a rig (else one camera over time).
         rectified: the images are rectified.
         monitor: the calibration check's parameters.
-        node_name: name of the ``<node>: calibration`` status; hardware_id: its hardware id.
+        node_fqn: the node's fully qualified name, for the ``<node FQN>: calibration`` status's
+            name; hardware_id: its hardware id.
     """
 
     def __init__(
@@ -70,11 +71,11 @@ class CalibratedStream:
         stereo: bool,
         rectified: bool,
         monitor: MonitorConfig | None,
-        node_name: str,
+        node_fqn: str,
         hardware_id: str = "",
     ) -> None:
         self.calibration = StreamCalibration(stereo, rectified, monitor)
-        self.node_name = node_name
+        self.node_fqn = node_fqn
         self.hardware_id = hardware_id
         self._infos: list[Any] | None = None
 
@@ -99,7 +100,7 @@ class CalibratedStream:
             changed = self.calibration.update(*models)
         except CalibrationError as err:
             self.calibration.clear()
-            status = calibration_error_status(err, self.node_name, self.hardware_id)
+            status = calibration_error_status(err, self.node_fqn, self.hardware_id)
             return CamerasUpdate(None, True, status, str(err))
         return CamerasUpdate(self.calibration.cameras, changed)
 
@@ -119,5 +120,5 @@ class CalibratedStream:
         if outputs.pose is not None and outputs.pose.ok:
             out.transform = relative_transform(outputs.pose, header, *frames)
         if outputs.status is not None:
-            out.status = calibration_status(outputs.status, self.node_name, self.hardware_id)
+            out.status = calibration_status(outputs.status, self.node_fqn, self.hardware_id)
         return out

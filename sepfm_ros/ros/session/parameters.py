@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -36,6 +37,39 @@ MAX_SAMPLES_OPTION = "max_samples"
 
 
 _MONITOR = MonitorConfig()  # the calibration check's defaults
+
+# the period of the /diagnostics report, named as diagnostic_updater names it
+DIAGNOSTIC_PERIOD = "diagnostic_updater.period"
+# old name -> current name. An old name still sets its parameter (``-p``, params files, the
+# node's overrides), with a warning that names the current one.
+RENAMED_PARAMS = {"diagnostics_period_s": DIAGNOSTIC_PERIOD}
+
+
+def renamed_text(old: str) -> str:
+    """The warning for the old parameter name ``old``."""
+    return f"parameter {old} is renamed {RENAMED_PARAMS[old]}; set {RENAMED_PARAMS[old]} instead"
+
+
+def current_name(name: str) -> str:
+    """``name``, or the current name of a renamed parameter (with a FutureWarning)."""
+    if name not in RENAMED_PARAMS:
+        return name
+    warnings.warn(renamed_text(name), FutureWarning, stacklevel=3)
+    return RENAMED_PARAMS[name]
+
+
+def adopt_renamed(overrides: dict[str, Any]) -> list[str]:
+    """Move the values of renamed parameters in a node's ``overrides`` (name -> rclpy
+    Parameter, from ``-p`` and params files) to their current names, unless those are set
+    too; the warnings to log (one per old name given)."""
+    texts = []
+    for old, new in RENAMED_PARAMS.items():
+        if old in overrides:
+            texts.append(renamed_text(old))
+            param = overrides.pop(old)
+            if new not in overrides:
+                overrides[new] = type(param)(new, value=param.value)
+    return texts
 
 
 @dataclass(frozen=True)
@@ -163,7 +197,7 @@ PARAMS: dict[str, ParamSpec] = {
     "calibration_error_rotation_deg": ParamSpec(
         _MONITOR.error_rotation_deg, "calibration check: ERROR above this, deg", 0.0001, 180.0
     ),
-    "diagnostics_period_s": ParamSpec(
+    DIAGNOSTIC_PERIOD: ParamSpec(
         1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
     ),
     "input_timeout_s": ParamSpec(
@@ -376,6 +410,7 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
             if name in _RCL_PARAMS or name.startswith("qos_overrides."):
                 continue
             try:
+                name = current_name(name)
                 values[name] = checked(name, value)
             except ParameterError as err:
                 raise ParameterError(f"params file {path}: {err}") from None
@@ -400,6 +435,7 @@ def given_params(items: Sequence[str] = (), params_file: str | Path | None = Non
         if ":=" not in item:
             raise ParameterError(f"parameter {item!r} is not of the form name:=value")
         name, text = item.split(":=", 1)
+        name = current_name(name)
         values[name] = parse_value(name, text)
         given.add(name)
     try:

@@ -75,7 +75,8 @@ class Session:
         values: every node parameter's value (:data:`~.parameters.PARAMS` names).
         stereo: two cameras of a rig (else one camera's frames over time).
         topics: the input image topics (resolved), for the ``images: auto`` rule.
-        status_name: the node name in the calibration status's name; hardware_id: its id.
+        status_name: the node's fully qualified name, in the calibration status's name (offline:
+            ``/sepfm``, the node the outputs are named for); hardware_id: its id.
         cache_size: frames whose features are kept (motion: each frame is detected once).
         parallel_detect: detect the second image on a helper thread (the live node).
 
@@ -88,7 +89,7 @@ class Session:
         values: Mapping[str, Any],
         stereo: bool,
         topics: Sequence[str],
-        status_name: str = NODE_NAME,
+        status_name: str = "/" + NODE_NAME,
         hardware_id: str = "",
         cache_size: int = 8,
         parallel_detect: bool = False,

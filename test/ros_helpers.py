@@ -144,7 +144,7 @@ class Client:
     def _on_diagnostics(self, msg):
         with self.lock:
             for status in msg.status:
-                if status.name == f"{self.node_name}: node":
+                if status.name == f"/{self.node_name}: node":
                     self.health.append(status_values(status))
                     level = int.from_bytes(status.level, "little")
                     self.health_log.append((time.monotonic(), level, status.message))

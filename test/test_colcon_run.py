@@ -217,7 +217,7 @@ def test_ros2_run_node_from_the_ament_prefix_publishes(colcon_install, ros_domai
     node = rclpy.create_node("sepfm_colcon_test", context=context)
 
     def on_diag(msg):
-        if any(s.name == f"{name}: node" for s in msg.status):
+        if any(s.name == f"/{name}: node" for s in msg.status):
             seen.set()
 
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diag, 10)

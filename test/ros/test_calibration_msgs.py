@@ -1,10 +1,11 @@
-"""CameraInfo -> camera model, pose -> TransformStamped, check -> DiagnosticStatus."""
+"""CameraInfo -> camera model, pose -> TransformStamped, check -> DiagnosticStatus and
+the stamped DiagnosticArray of ~/calibration_check."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from scipy.spatial.transform import Rotation
 from sensor_msgs.msg import CameraInfo
 from std_msgs.msg import Header
@@ -13,6 +14,8 @@ from sepfm_ros.geometry.calibrated.calibration_check import WARN, CalibrationSta
 from sepfm_ros.geometry.calibrated.camera import CalibrationError
 from sepfm_ros.geometry.calibrated.pose import RelativePose
 from sepfm_ros.ros.msgs.calibration import (
+    calibration_check_message,
+    calibration_check_statuses,
     calibration_error_status,
     calibration_status,
     camera_model_from_info,
@@ -76,8 +79,25 @@ def test_relative_transform_is_b_in_a():
 
 def test_calibration_status_message():
     st = CalibrationStatus(WARN, "stereo calibration drifting", {"epipolar_median_px": 1.5})
-    msg = calibration_status(st, "sepfm")
-    assert msg.name == "sepfm: calibration" and msg.level == DiagnosticStatus.WARN
+    msg = calibration_status(st, "/rig_a/sepfm")
+    assert msg.name == "/rig_a/sepfm: calibration" and msg.level == DiagnosticStatus.WARN
     assert status_values(msg)["epipolar_median_px"] == "1.5"
-    err = calibration_error_status(CalibrationError("K is all zeros"), "sepfm")
+    err = calibration_error_status(CalibrationError("K is all zeros"), "/rig_a/sepfm")
     assert err.level == DiagnosticStatus.ERROR and "K is all zeros" in err.message
+    assert err.name == "/rig_a/sepfm: calibration"
+
+
+def test_calibration_check_message_is_stamped_with_the_pair():
+    st = calibration_status(CalibrationStatus(WARN, "drifting", {}), "/sepfm")
+    header = Header(frame_id="left_camera_optical_frame")
+    header.stamp.sec, header.stamp.nanosec = 1700000000, 100000000
+    msg = calibration_check_message(header, st)
+    assert isinstance(msg, DiagnosticArray)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (1700000000, 100000000)
+    assert msg.header.frame_id == "left_camera_optical_frame"
+    assert list(msg.status) == [st]
+    header.stamp.sec = 5  # a copy of the header, not the caller's object
+    assert msg.header.stamp.sec == 1700000000
+    # readers take the array and 0.1.0's bare status alike
+    assert calibration_check_statuses(msg) == [st]
+    assert calibration_check_statuses(st) == [st]

@@ -16,7 +16,7 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from diagnostic_msgs.msg import DiagnosticStatus  # noqa: E402
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus  # noqa: E402
 from geometry_msgs.msg import TransformStamped  # noqa: E402
 from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
 from scipy.spatial.transform import Rotation  # noqa: E402
@@ -35,17 +35,19 @@ LEVEL = {int.from_bytes(v, "little"): v for v in (DiagnosticStatus.OK, Diagnosti
 
 
 class Outputs:
-    """~/relative_transform and ~/calibration_check of the node, by stamp / in order."""
+    """~/relative_transform of the node by stamp, and its ~/calibration_check statuses in order
+    with their header stamps (a DiagnosticArray stamped with the pair's header)."""
 
     def __init__(self, ros) -> None:
         self.lock = threading.Lock()
         self.pose: dict[int, TransformStamped] = {}
         self.checks: list[DiagnosticStatus] = []
+        self.check_stamps: list[int] = []
         ros.node.create_subscription(
             TransformStamped, f"/{NODE}/relative_transform", self._on_pose, RELIABLE
         )
         ros.node.create_subscription(
-            DiagnosticStatus, f"/{NODE}/calibration_check", self._on_check, RELIABLE
+            DiagnosticArray, f"/{NODE}/calibration_check", self._on_check, RELIABLE
         )
 
     def _on_pose(self, msg):
@@ -54,7 +56,19 @@ class Outputs:
 
     def _on_check(self, msg):
         with self.lock:
-            self.checks.append(msg)
+            self.checks.extend(msg.status)
+            self.check_stamps.extend([stamp_ns(msg.header.stamp)] * len(msg.status))
+
+    def wait_check(self, stamp: int, timeout: float = 5.0) -> DiagnosticStatus:
+        """The calibration check stamped ``stamp`` (AssertionError when none arrives)."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            with self.lock:
+                if stamp in self.check_stamps:
+                    return self.checks[self.check_stamps.index(stamp)]
+            time.sleep(0.01)
+        with self.lock:
+            raise AssertionError(f"no check stamped {stamp}; stamps {self.check_stamps}")
 
 
 def rig(shared_data):
@@ -123,6 +137,7 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
             deadline = time.monotonic() + 5.0
             while stamp not in outputs.pose and time.monotonic() < deadline:
                 time.sleep(0.01)
+            outputs.wait_check(stamp)  # each pair's check carries the pair's stamp
             with outputs.lock:
                 tf = outputs.pose[stamp]
             assert tf.header.frame_id == "left_camera_optical_frame"
@@ -149,7 +164,8 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
         assert np.median(direction_errors) < 5.0 and max(direction_errors) < 10.0
         with outputs.lock:
             last = outputs.checks[-1]
-        assert last.name == f"{NODE}: calibration"
+            assert outputs.check_stamps == sorted(outputs.pose), "one check per pair, by stamp"
+        assert last.name == f"/{NODE}: calibration"
         assert last.level == DiagnosticStatus.OK, last.message
         health = client.latest_health(after=0.0)
         assert "input_publishers" in health
@@ -160,9 +176,7 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
         for k in range(8, 20):
             stamp = send(k, warp)
             client.wait_outputs(stamp, need_f=False)
-            time.sleep(0.05)
-            with outputs.lock:
-                levels.append(outputs.checks[-1].level)
+            levels.append(outputs.wait_check(stamp).level)
             if levels[-1] in (DiagnosticStatus.WARN, DiagnosticStatus.ERROR):
                 break
         assert levels[-1] in (DiagnosticStatus.WARN, DiagnosticStatus.ERROR), levels
@@ -172,9 +186,7 @@ def test_stereo_camera_info_gives_pose_and_calibration_check(ros, tmp_path, shar
         values, F, _ = client.wait_outputs(stamp)
         assert values.coordinates == "image" and F is not None
         assert values.pose_kind == TwoViewEstimate.POSE_NONE and values.pose_status
-        time.sleep(0.2)
-        with outputs.lock:
-            last = outputs.checks[-1]
+        last = outputs.wait_check(stamp)
         assert last.level == DiagnosticStatus.ERROR and "camera_info unusable" in last.message
         assert "camera_info unusable" in proc.output()
     finally:

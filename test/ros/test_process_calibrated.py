@@ -16,7 +16,7 @@ from sensor_msgs.msg import CameraInfo
 from sepfm_msgs.msg import TwoViewEstimate
 from sepfm_ros.geometry.calibrated.pose import pose_from_projections
 from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.bags.results import read_results
+from sepfm_ros.ros.bags.results import read_calibration_checks, read_results
 from sepfm_ros.ros.commands import make_bag
 from sepfm_ros.ros.msgs.headers import stamp_ns
 from sepfm_ros.ros.offline.process import run_process
@@ -43,17 +43,20 @@ def kitti(shared_data):
 
 
 def _outputs(out):
-    from diagnostic_msgs.msg import DiagnosticStatus
+    """The relative transforms and the calibration checks' statuses written to ``out``; the
+    checks are stamped DiagnosticArrays, each with the stamp of a pair answered on
+    ~/estimate."""
     from geometry_msgs.msg import TransformStamped
 
     with BagReader(out) as reader:
         poses = [
             deserialize_message(r.data, TransformStamped) for r in reader.messages([TOPICS[0]])
         ]
-        checks = [
-            deserialize_message(r.data, DiagnosticStatus) for r in reader.messages([TOPICS[1]])
-        ]
-    return poses, checks
+        assert reader.topics[TOPICS[1]].msgtype == "diagnostic_msgs/msg/DiagnosticArray"
+    checks = read_calibration_checks(out)
+    estimates = [stamp_ns(r.estimate.header.stamp) for r in read_results(out)]
+    assert [c.stamp_ns for c in checks] == estimates  # one per pair, stamped with the pair's
+    return poses, [c.status for c in checks]
 
 
 def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_path):
@@ -70,7 +73,7 @@ def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_pat
         # the right camera sits one calibrated baseline to the right (+x) of the left one
         assert np.linalg.norm([p.x, p.y, p.z]) == pytest.approx(baseline, rel=1e-6)
         assert p.x > 0.9 * baseline
-    assert checks[-1].name == "sepfm: calibration"
+    assert checks[-1].name == "/sepfm: calibration"  # the node the outputs are named for
     assert checks[-1].level == b"\x00", checks[-1].message  # OK
     # ~/estimate carries the same pose, metric, in undistorted pixels of K
     estimates = {

@@ -91,7 +91,7 @@ class Listener:
 
     def _on_diag(self, msg: DiagnosticArray) -> None:
         for status in msg.status:
-            if status.name == f"{NAME}: rectify":
+            if status.name == f"/{NAME}: rectify":
                 with self.lock:
                     self.health.append({kv.key: kv.value for kv in status.values})
 

@@ -16,13 +16,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from diagnostic_msgs.msg import DiagnosticStatus
-from rclpy.serialization import deserialize_message
 
 from sepfm_ros.demo import isolate_ros_environment, replay_through_node
 from sepfm_ros.fleet.records import InputChoice, SliceResult, SliceTask
-from sepfm_ros.ros.bags.reader import BagReader
-from sepfm_ros.ros.bags.results import calibrated_topics, read_results
+from sepfm_ros.ros.bags.results import read_calibration_checks, read_results
 from sepfm_ros.ros.bags.synthesis import make_bag, shared_frames
 from sepfm_ros.ros.offline.audit_slices import audit_slice, inspect_bag
 from sepfm_ros.ros.offline.process import run_process
@@ -52,10 +49,8 @@ def kitti_bag(shared_data, tmp_path_factory) -> Path:
 
 def calibration_levels(bag: Path, namespace: str = "/sepfm") -> list[str]:
     """The ~/calibration_check levels in a bag of the node's outputs, in log-time order."""
-    topic = calibrated_topics(namespace)["calibration_check"]
-    with BagReader(bag) as reader:
-        msgs = [deserialize_message(raw.data, DiagnosticStatus) for raw in reader.messages([topic])]
-    return [LEVELS[int.from_bytes(m.level, "little")] for m in msgs]
+    checks = read_calibration_checks(bag, namespace)
+    return [LEVELS[int.from_bytes(c.status.level, "little")] for c in checks]
 
 
 def answers(bag: Path) -> dict[int, tuple[np.ndarray | None, int]]:

@@ -18,7 +18,7 @@ from sepfm_ros.ros.node.spin import (
     run_node,
     warm_up_interruptibly,
 )
-from sepfm_ros.ros.session.parameters import parameters_help
+from sepfm_ros.ros.session.parameters import parameters_help, renamed_help
 
 
 def _usage() -> str:
@@ -26,10 +26,14 @@ def _usage() -> str:
         "The sepfm node: subscribes to left/image_raw + right/image_raw (mode:=stereo) or",
         "image_raw (mode:=motion), publishes ~/estimate (sepfm_msgs/TwoViewEstimate, one per",
         "pair), ~/matches (sepfm_msgs/MatchArray), /diagnostics, ~/debug_image and, with",
-        "camera_info, ~/relative_transform and ~/calibration_check.",
+        "camera_info, ~/relative_transform and ~/calibration_check (diagnostic_msgs/",
+        "DiagnosticArray stamped with the pair's header). /diagnostics names its statuses",
+        "'<node FQN>: node' and '<node FQN>: calibration' (e.g. '/front/sepfm: node'), every",
+        "diagnostic_updater.period seconds.",
         "",
         "parameters:",
         parameters_help(),
+        renamed_help(),
     ]
     return "\n".join(lines)
 

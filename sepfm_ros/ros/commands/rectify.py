@@ -39,7 +39,7 @@ from sepfm_ros.ros.node.rectify import (
     RectifyNode,
 )
 from sepfm_ros.ros.node.spin import parse_command_line, run_node
-from sepfm_ros.ros.session.parameters import parameters_help
+from sepfm_ros.ros.session.parameters import parameters_help, renamed_help
 
 
 def _usage() -> str:
@@ -48,10 +48,12 @@ def _usage() -> str:
             __doc__.split("\n\n")[0],
             "",
             "Subscribes to left/image_raw + right/image_raw and sepfm/estimate + sepfm/matches;",
-            "publishes left/image_rect, right/image_rect and /diagnostics.",
+            "publishes left/image_rect, right/image_rect and /diagnostics (status",
+            "'<node FQN>: rectify', every diagnostic_updater.period seconds).",
             "",
             "parameters (read-only):",
             parameters_help(PARAMS),
+            renamed_help(),
         ]
     )
 

@@ -50,6 +50,13 @@ def renamed_text(old: str) -> str:
     return f"parameter {old} is renamed {RENAMED_PARAMS[old]}; set {RENAMED_PARAMS[old]} instead"
 
 
+def renamed_help() -> str:
+    """The renamed parameters, for --help."""
+    return "renamed (the old name still works, with a warning):\n" + "\n".join(
+        f"  {old} -> {new}" for old, new in RENAMED_PARAMS.items()
+    )
+
+
 def current_name(name: str) -> str:
     """``name``, or the current name of a renamed parameter (with a FutureWarning)."""
     if name not in RENAMED_PARAMS:

@@ -42,7 +42,12 @@ from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.session.parameters import PARAMS as NODE_PARAMS
-from sepfm_ros.ros.session.parameters import ParamSpec, descriptor, parameter_error
+from sepfm_ros.ros.session.parameters import (
+    ParamSpec,
+    alias_defaults,
+    descriptor,
+    parameter_error,
+)
 from sepfm_ros.stream.pairing import Frame, StereoPairing
 from sepfm_ros.stream.sync import LEFT, RIGHT
 
@@ -55,7 +60,7 @@ PENDING_ESTIMATES = 20
 
 _PARAMS: dict[str, ParamSpec] = {
     name: NODE_PARAMS[name]
-    for name in ("transport", "input_reliability", "sync_slop_s", "sync_queue_size")
+    for name in ("image_transport", "input_reliability", "sync_slop_s", "sync_queue_size")
 } | {
     "encoding": ParamSpec(
         "mono8", "encoding of the rectified images", choices=COLOR_SPACES, read_only=True
@@ -132,8 +137,11 @@ class RectifyNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
+        aliased, warnings = alias_defaults(getattr(self, "_parameter_overrides", {}), PARAMS)
+        for warning in warnings:
+            self.get_logger().warning(warning)
         for name, spec in PARAMS.items():
-            self.declare_parameter(name, spec.default, descriptor(name, spec))
+            self.declare_parameter(name, aliased.get(name, spec.default), descriptor(name, spec))
         self._values = {name: self.get_parameter(name).value for name in PARAMS}
         errors = [e for n, v in self._values.items() if (e := parameter_error(n, v, PARAMS))]
         if errors:
@@ -158,7 +166,7 @@ class RectifyNode(Node):
             self.create_publisher(Image, "right/image_rect", reliable),
         )
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
-        transport = self._values["transport"]
+        transport = self._values["image_transport"]
         msg_type = CompressedImage if transport == "compressed" else Image
         self._subs = [
             InputSubscription(

@@ -65,6 +65,7 @@ from sepfm_ros.ros.session.calibrated import CamerasUpdate
 from sepfm_ros.ros.session.parameters import (
     NODE_NAME,
     PARAMS,
+    alias_defaults,
     change_errors,
     descriptor,
     parameter_error,
@@ -120,7 +121,7 @@ class SepfmNode(Node):
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
         values = self._declare_parameters()
         self._mode = values["mode"]
-        self._transport = values["transport"]
+        self._transport = values["image_transport"]
         self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
@@ -167,8 +168,11 @@ class SepfmNode(Node):
 
     def _declare_parameters(self) -> dict[str, Any]:
         """Declare every parameter; their values (ValueError listing the invalid ones)."""
+        aliased, warnings = alias_defaults(getattr(self, "_parameter_overrides", {}))
+        for warning in warnings:
+            self.get_logger().warning(warning)
         for name, spec in PARAMS.items():
-            self.declare_parameter(name, spec.default, descriptor(name, spec))
+            self.declare_parameter(name, aliased.get(name, spec.default), descriptor(name, spec))
         values = self._param_values()
         errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
         if errors:

@@ -7,6 +7,7 @@
 
 from __future__ import annotations
 
+import sys
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -37,6 +38,9 @@ MAX_SAMPLES_OPTION = "max_samples"
 
 _MONITOR = MonitorConfig()  # the calibration check's defaults
 
+#: old parameter names still read, with a warning: old name -> the parameter it sets
+ALIASES = {"transport": "image_transport"}
+
 
 @dataclass(frozen=True)
 class ParamSpec:
@@ -57,9 +61,10 @@ PARAMS: dict[str, ParamSpec] = {
         choices=MODES,
         read_only=True,
     ),
-    "transport": ParamSpec(
+    "image_transport": ParamSpec(
         "raw",
-        "raw: sensor_msgs/Image; compressed: sensor_msgs/CompressedImage on <topic>/compressed",
+        "image_transport's TransportHints: raw = sensor_msgs/Image on <topic>; compressed ="
+        " sensor_msgs/CompressedImage on <topic>/compressed (jpeg, png)",
         choices=TRANSPORTS,
         read_only=True,
     ),
@@ -301,8 +306,43 @@ class GivenParams:
     given: frozenset[str]
 
 
+def alias_warning(old: str) -> str:
+    """The warning for the old parameter name ``old`` (a key of :data:`ALIASES`)."""
+    return f"parameter {old!r} is an old name of {ALIASES[old]!r}: use -p {ALIASES[old]}:=..."
+
+
+def current_name(name: str, warn: bool = True) -> str:
+    """The parameter ``name`` sets: its :data:`ALIASES` entry (warned on stderr), else itself."""
+    if name not in ALIASES:
+        return name
+    if warn:
+        print(f"sepfm_ros: warning: {alias_warning(name)}", file=sys.stderr)
+    return ALIASES[name]
+
+
+def alias_defaults(
+    overrides: Mapping[str, Any], params: Mapping[str, ParamSpec] = PARAMS
+) -> tuple[dict[str, Any], list[str]]:
+    """A node's values given under an old name (``overrides``: rclpy's parameter overrides, name
+    -> Parameter or value): ({current name: value} for those of ``params`` not given under their
+    own name, the warnings to log)."""
+    values: dict[str, Any] = {}
+    warnings: list[str] = []
+    for old, new in ALIASES.items():
+        if old not in overrides or new not in params:
+            continue
+        value = getattr(overrides[old], "value", overrides[old])
+        if new in overrides:
+            warnings.append(f"{alias_warning(old)}; ignored, {new} is given")
+        else:
+            warnings.append(alias_warning(old))
+            values[new] = value
+    return values, warnings
+
+
 def parse_value(name: str, text: str) -> Any:
     """The value of parameter ``name`` written as ``text`` (``-p name:=text``), validated."""
+    name = current_name(name, warn=False)
     if name not in PARAMS:
         raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
     default = PARAMS[name].default
@@ -325,6 +365,7 @@ def parse_value(name: str, text: str) -> Any:
 def checked(name: str, value: Any) -> Any:
     """``value`` for parameter ``name`` as the node takes it (an integer where a float is
     expected becomes a float); ParameterError when it is not acceptable."""
+    name = current_name(name, warn=False)
     if name not in PARAMS:
         raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
     default = PARAMS[name].default
@@ -376,7 +417,7 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
             if name in _RCL_PARAMS or name.startswith("qos_overrides."):
                 continue
             try:
-                values[name] = checked(name, value)
+                values[current_name(name)] = checked(name, value)
             except ParameterError as err:
                 raise ParameterError(f"params file {path}: {err}") from None
     if not values:
@@ -400,7 +441,9 @@ def given_params(items: Sequence[str] = (), params_file: str | Path | None = Non
         if ":=" not in item:
             raise ParameterError(f"parameter {item!r} is not of the form name:=value")
         name, text = item.split(":=", 1)
-        values[name] = parse_value(name, text)
+        value = parse_value(name, text)
+        name = current_name(name)
+        values[name] = value
         given.add(name)
     try:
         pipeline_config(values)

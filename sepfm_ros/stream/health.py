@@ -3,8 +3,9 @@
 
 The level comes from what happened recently (the last ``window_s`` seconds), not from lifetime
 counters, so one bad message does not leave WARN latched: ERROR while an internal exception
-occurred in the window, WARN while bad inputs, lost samples, frames missing from a camera's stamp
-sequence (:mod:`sepfm_ros.stream.frame_gaps`), stamp jumps or an input stall did, OK otherwise. Lifetime counters stay in the values for the record.
+occurred in the window, WARN while bad inputs, lost samples, frames missing from a camera's
+stamp sequence (:mod:`sepfm_ros.stream.frame_gaps`), stamp jumps or an input stall did, OK
+otherwise. Lifetime counters stay in the values for the record.
 """
 
 from __future__ import annotations

@@ -22,8 +22,8 @@ from ros_helpers import RELIABLE, header, start_node  # noqa: E402
 from sensor_msgs.msg import CameraInfo, CompressedImage  # noqa: E402
 
 from sepfm_ros.ros.bags.synthesis import camera_info_message, camera_infos  # noqa: E402
-from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
 from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
 
 NS = "/t_tr"
 NODE = "sepfm_tr"

@@ -23,10 +23,10 @@ from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array
 from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed, numpy_to_image
+from sepfm_ros.ros.session.answer import PairAnswer, add_timings
 
 #: CompressedImage.format of ~/debug_image/compressed (image_transport's compressed plugin)
 DEBUG_COMPRESSED_FORMAT = "bgr8; jpeg compressed bgr8"
-from sepfm_ros.ros.session.answer import PairAnswer, add_timings
 
 
 class NodeOutputs:

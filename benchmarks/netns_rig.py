@@ -162,8 +162,8 @@ def run_link(transport: str, seconds: float, workdir: Path, domain_id: int) -> R
         node = link.exec(
             link.node,
             ["nice", "-n", NODE_NICE, py, "-m", "sepfm_ros", "node", "--ros-args",
-             "-p", "mode:=motion", "-p", f"image_transport:={transport}", "-r", f"image_raw:={TOPIC}",
-             "-p", "diagnostics_period_s:=0.5"],
+             "-p", "mode:=motion", "-p", f"image_transport:={transport}",
+             "-r", f"image_raw:={TOPIC}", "-p", "diagnostics_period_s:=0.5"],
             workdir / f"node_{transport}.log", env,
         )  # fmt: skip
         procs.append(node)

@@ -3,11 +3,12 @@
     ros2 launch sepfm_ros sepfm_launch.py mode:=motion image:=/camera/image_raw
     ros2 launch sepfm_ros sepfm_launch.py left:=/stereo/left/image_raw \
         right:=/stereo/right/image_raw
-    ros2 launch sepfm_ros sepfm_launch.py namespace:=robot1 transport:=compressed use_sim_time:=true
+    ros2 launch sepfm_ros sepfm_launch.py namespace:=robot1 image_transport:=compressed \
+        use_sim_time:=true
 
-Arguments: mode (stereo|motion), transport (raw|compressed), params_file, namespace,
+Arguments: mode (stereo|motion), image_transport (raw|compressed), params_file, namespace,
 use_sim_time, and the input topics left, right (stereo) and image (motion). The topics are base
-image topics: with transport:=compressed the node adds /compressed after the remap, as
+image topics: with image_transport:=compressed the node adds /compressed after the remap, as
 image_transport does.
 """
 
@@ -26,7 +27,7 @@ def generate_launch_description() -> LaunchDescription:
     default_params = os.path.join(get_package_share_directory("sepfm_ros"), "config", "sepfm.yaml")
     args = {
         "mode": ("stereo", "stereo or motion"),
-        "transport": ("raw", "raw or compressed (the node subscribes to <topic>/compressed)"),
+        "image_transport": ("raw", "raw or compressed (the node subscribes to <topic>/compressed)"),
         "params_file": (default_params, "node parameters (YAML)"),
         "namespace": ("", "namespace of the node (its relative input topics follow it)"),
         "use_sim_time": ("false", "true: stamps and /diagnostics on /clock time (bag replay)"),
@@ -44,7 +45,7 @@ def generate_launch_description() -> LaunchDescription:
             LaunchConfiguration("params_file"),
             {
                 "mode": LaunchConfiguration("mode"),
-                "transport": LaunchConfiguration("transport"),
+                "image_transport": LaunchConfiguration("image_transport"),
                 "use_sim_time": ParameterValue(
                     LaunchConfiguration("use_sim_time"), value_type=bool
                 ),

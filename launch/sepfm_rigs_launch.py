@@ -1,12 +1,12 @@
 """Launch one sepfm node per stereo rig of a robot, each in its own namespace.
 
     ros2 launch sepfm_ros sepfm_rigs_launch.py rigs:=front,rear
-    ros2 launch sepfm_ros sepfm_rigs_launch.py rigs:=front,left,right transport:=compressed
+    ros2 launch sepfm_ros sepfm_rigs_launch.py rigs:=front,left,right image_transport:=compressed
 
 Each rig NAME gets a node ``/NAME/sepfm`` (the config/sepfm.yaml parameters, stereo mode) whose
 inputs are the rig's ``/NAME/left/image_raw`` and ``/NAME/right/image_raw`` with their
 ``camera_info`` beside them, and whose outputs and calibration check are under ``/NAME/sepfm/``.
-Arguments: rigs (comma-separated namespaces), transport (raw|compressed), params_file,
+Arguments: rigs (comma-separated namespaces), image_transport (raw|compressed), params_file,
 use_sim_time. How many rigs a host answers completely is measured in docs/benchmarks.md
 (``benchmarks/bench_rigs.py``).
 """
@@ -46,7 +46,7 @@ def _nodes(context) -> list[Node]:
                 LaunchConfiguration("params_file"),
                 {
                     "mode": "stereo",
-                    "transport": LaunchConfiguration("transport"),
+                    "image_transport": LaunchConfiguration("image_transport"),
                     "use_sim_time": sim_time,
                 },
             ],
@@ -59,7 +59,7 @@ def generate_launch_description() -> LaunchDescription:
     default_params = os.path.join(get_package_share_directory("sepfm_ros"), "config", "sepfm.yaml")
     args = {
         "rigs": ("stereo", "comma-separated rig namespaces, one node each"),
-        "transport": ("raw", "raw or compressed (the nodes subscribe to <topic>/compressed)"),
+        "image_transport": ("raw", "raw or compressed (the nodes subscribe to <topic>/compressed)"),
         "params_file": (default_params, "node parameters (YAML), shared by every rig"),
         "use_sim_time": ("false", "true: stamps and /diagnostics on /clock time (bag replay)"),
     }

@@ -10,7 +10,7 @@ import pytest
 from ground_truth import REPO_ROOT
 
 LAUNCH = REPO_ROOT / "launch" / "sepfm_launch.py"
-ARGUMENTS = {"mode", "transport", "params_file", "namespace", "use_sim_time", "left", "right"}
+ARGUMENTS = {"mode", "image_transport", "params_file", "namespace", "use_sim_time", "left", "right"}
 
 
 def _literal_dict_keys(tree: ast.AST) -> set[str]:

@@ -36,7 +36,7 @@ def test_each_rig_is_a_stereo_node_in_its_namespace():
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "args":
             keys |= {k.value for k in node.value.keys}
-    assert keys == {"rigs", "transport", "params_file", "use_sim_time"}
+    assert keys == {"rigs", "image_transport", "params_file", "use_sim_time"}
     calls = [
         n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "Node"
     ]
@@ -55,4 +55,4 @@ def test_launch_description_generates():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     names = {getattr(e, "name", None) for e in module.generate_launch_description().entities}
-    assert {"rigs", "transport", "params_file", "use_sim_time"} <= names
+    assert {"rigs", "image_transport", "params_file", "use_sim_time"} <= names

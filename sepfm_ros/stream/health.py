@@ -3,8 +3,9 @@
 
 The level comes from what happened recently (the last ``window_s`` seconds), not from lifetime
 counters, so one bad message does not leave WARN latched: ERROR while an internal exception
-occurred in the window, WARN while bad inputs, lost samples, stamp jumps or an input stall did,
-OK otherwise. Lifetime counters stay in the values for the record.
+occurred in the window, WARN while bad inputs, lost samples, frames missing from a camera's
+stamp sequence (:mod:`sepfm_ros.stream.frame_gaps`), stamp jumps or an input stall did, OK
+otherwise. Lifetime counters stay in the values for the record.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ from typing import Any
 
 import numpy as np
 
+from sepfm_ros.stream.frame_gaps import StampGaps
+
 OK, WARN, ERROR = 0, 1, 2
 INTERNAL_PREFIX = "internal_"  # error kinds of exceptions inside the node (ERROR level)
 
@@ -24,6 +27,8 @@ INTERNAL_PREFIX = "internal_"  # error kinds of exceptions inside the node (ERRO
 STALL_CHECK_PERIOD_S = 0.1
 # Events of one kind remembered for the recent window (bounded under a flood).
 MAX_EVENTS_PER_KIND = 4096
+# recent-window kinds of the stamp sequences (frames received with a known period, and missing)
+_STAMPED, _MISSING = "frames_stamped", "frames_missing"
 
 
 class RecentEvents:
@@ -112,6 +117,7 @@ class Health:
         self.received: Counter[str] = Counter()
         self.errors: Counter[str] = Counter()  # lifetime, by kind
         self.lost: Counter[str] = Counter()  # samples lost in transport, by input
+        self.gaps = StampGaps(pause_s=max(1.0, self.input_timeout_s))
         self.published = 0
         self.not_ok = 0
         self.stamp_jumps = 0
@@ -152,6 +158,17 @@ class Health:
         with self._lock:
             self.lost[topic] += count
             self._recent.add("lost_samples", self._clock(), count)
+
+    def frame_stamp(self, topic: str, stamp_ns: int) -> None:
+        """A valid frame of input ``topic`` stamped ``stamp_ns``: counts the frames missing
+        from its stamp sequence before it."""
+        with self._lock:
+            missing = self.gaps.add(topic, stamp_ns)
+            if self.gaps.period_s(topic) is not None:
+                now = self._clock()
+                self._recent.add(_STAMPED, now)
+                if missing:
+                    self._recent.add(_MISSING, now, missing)
 
     def stamp_jump(self) -> None:
         """The input stamps went back and the history was reset."""
@@ -239,6 +256,7 @@ class Health:
         if stall is not None:
             return WARN, stall
         parts = []
+        stamped, missing = recent.pop(_STAMPED, 0), recent.pop(_MISSING, 0)
         lost = recent.pop("lost_samples", 0)
         jumps = recent.pop("stamp_jump", 0)
         bad = sum(recent.values())
@@ -249,6 +267,12 @@ class Health:
             parts.append(
                 f"{lost} input samples lost in transport (large images over best-effort QoS:"
                 " publish reliable, or set input_reliability:=reliable)"
+            )
+        if missing:
+            parts.append(
+                f"{missing} of {missing + stamped} frames ({missing / (missing + stamped):.0%})"
+                " missing from the camera stamp sequence: sent but not received (a link too slow"
+                " for the images: image_transport:=compressed needs less), or dropped by the camera"
             )
         if jumps:
             parts.append(f"input stamps jumped back {jumps} times (history reset)")
@@ -279,7 +303,12 @@ class Health:
             for kind, count in sorted(self.errors.items()):
                 values[f"errors_{kind}"] = count
             recent = self._recent.counts(now)
+            recent.pop(_STAMPED, None)
             values["problems_recent"] = sum(recent.values())
+            values["frames_missing"] = sum(self.gaps.missing(t) for t in self.topics)
+            for topic in self.topics:
+                values[f"frames_missing_{topic}"] = self.gaps.missing(topic)
+                values[f"frames_missing_share_{topic}"] = round(self.gaps.share_missing(topic), 4)
             values["lost_samples"] = sum(self.lost.values())
             for topic, count in sorted(self.lost.items()):
                 values[f"lost_samples_{topic}"] = count

@@ -368,7 +368,7 @@ def test_compressed_transport_follows_remaps(ros, tmp_path, images, shared_data)
         "-r",
         "right/image_raw:=/robot/cam/right/image_raw",
         "-p",
-        "transport:=compressed",
+        "image_transport:=compressed",
         input_qos=DEFAULT_QOS,
     )
     try:

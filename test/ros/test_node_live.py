@@ -115,7 +115,7 @@ def compressed(ros, tmp_path_factory):
             "right": (f"{ns}/right/image_raw/compressed", CompressedImage),
         },
         "-p",
-        "transport:=compressed",
+        "image_transport:=compressed",
         "-r",
         f"left/image_raw/compressed:={ns}/left/image_raw/compressed",
         "-r",

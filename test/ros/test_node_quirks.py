@@ -30,7 +30,7 @@ def _node(name: str, ros, tmp_path, transport: str):
     kind = CompressedImage if transport == "compressed" else Image
     ns = f"/t_{name}"
     inputs = {side: (f"{ns}/{side}/image_raw{suffix}", kind) for side in ("left", "right")}
-    args = ["-p", f"transport:={transport}", "-p", "seed:=0"]
+    args = ["-p", f"image_transport:={transport}", "-p", "seed:=0"]
     for side in ("left", "right"):
         args += ["-r", f"{side}/image_raw{suffix}:={ns}/{side}/image_raw{suffix}"]
     return start_node(name, tmp_path, ros, inputs, *args)

@@ -119,7 +119,7 @@ def test_a_node_refuses_a_bad_parameter_or_a_non_ros_argument_with_exit_2(comman
         "node": ("threshold_px:=-1.0", "threshold_px:=wide"),
         "rectify": ("min_inliers:=3", "min_inliers:=many"),
     }[command]
-    for bad in (range_, type_, "transport:=carrier_pigeon"):
+    for bad in (range_, type_, "image_transport:=carrier_pigeon"):
         r = subprocess.run(
             [*run, "--ros-args", "-p", bad], capture_output=True, text=True, timeout=600
         )

@@ -96,7 +96,7 @@ def stereo_node(name, tmp, ros, transport="raw", extra=(), input_qos=KEEP_ALL):
     suffix = "/compressed" if transport == "compressed" else ""
     msg_type = CompressedImage if transport == "compressed" else Image
     left, right = f"{ns}/left/image_raw{suffix}", f"{ns}/right/image_raw{suffix}"
-    args = ["-p", f"transport:={transport}", "-p", "seed:=1"]
+    args = ["-p", f"image_transport:={transport}", "-p", "seed:=1"]
     args += ["-r", f"left/image_raw{suffix}:={left}", "-r", f"right/image_raw{suffix}:={right}"]
     if input_qos is KEEP_ALL:
         args += keep_all_args(left, right)

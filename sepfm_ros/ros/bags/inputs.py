@@ -44,7 +44,7 @@ class InputSpec:
 
     def node_params(self) -> list[str]:
         """``--ros-args`` for a node that consumes this bag as recorded (remaps when needed)."""
-        args = ["-p", f"mode:={self.mode}", "-p", f"transport:={self.transport}"]
+        args = ["-p", f"mode:={self.mode}", "-p", f"image_transport:={self.transport}"]
         for default, topic in zip(NODE_INPUTS[self.mode], self.topics, strict=True):
             base = (
                 topic.removesuffix(COMPRESSED_SUFFIX) if self.transport == "compressed" else topic

@@ -3,7 +3,7 @@
 A consumer of the sepfm node's typed outputs. It subscribes to
 
 - ``left/image_raw`` and ``right/image_raw`` (the sepfm node's input topics, the same remaps,
-  ``transport`` and encodings; paired by stamp as the sepfm node pairs them), and
+  ``image_transport`` and encodings; paired by stamp as the sepfm node pairs them), and
 - ``sepfm/estimate`` (``sepfm_msgs/TwoViewEstimate``) and ``sepfm/matches``
   (``sepfm_msgs/MatchArray``): the outputs of a sepfm node named ``sepfm`` in the same
   namespace; remap them for another name. An estimate and its matches are joined by header

@@ -1,7 +1,10 @@
 """The node's publishers and what it publishes for a pair (the messages of
 :mod:`sepfm_ros.ros.session.answer`): ``~/estimate``, ``~/matches``, ``~/relative_transform``,
-``~/calibration_check``, ``~/debug_image``, and the ``/diagnostics`` report. All reliable,
-keep-last 10 (a consumer subscribed before the pair arrives gets every answer)."""
+``~/calibration_check``, ``~/debug_image`` with its image_transport ``compressed`` companion
+``~/debug_image/compressed`` (JPEG, format ``bgr8; jpeg compressed bgr8`` as image_transport's
+compressed publisher writes it), and the ``/diagnostics`` report. All reliable, keep-last 10 (a
+consumer subscribed before the pair arrives gets every answer). The debug image is drawn, and
+encoded, only for subscribers of either topic."""
 
 from __future__ import annotations
 
@@ -13,14 +16,17 @@ from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from geometry_msgs.msg import TransformStamped
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from sensor_msgs.msg import Image
+from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from sepfm_msgs.msg import MatchArray, TwoViewEstimate
 from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array
-from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed, numpy_to_image
 from sepfm_ros.ros.session.answer import PairAnswer, add_timings
+
+#: CompressedImage.format of ~/debug_image/compressed (image_transport's compressed plugin)
+DEBUG_COMPRESSED_FORMAT = "bgr8; jpeg compressed bgr8"
 
 
 class NodeOutputs:
@@ -31,6 +37,9 @@ class NodeOutputs:
         self.estimate = node.create_publisher(TwoViewEstimate, "~/estimate", reliable)
         self.matches = node.create_publisher(MatchArray, "~/matches", reliable)
         self.debug = node.create_publisher(Image, "~/debug_image", reliable)
+        self.debug_compressed = node.create_publisher(
+            CompressedImage, "~/debug_image/compressed", reliable
+        )
         self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
         self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
         self.calibration = node.create_publisher(DiagnosticArray, "~/calibration_check", reliable)
@@ -56,9 +65,17 @@ class NodeOutputs:
         add_timings(answer.estimate, {"publish": publish_ms})
         self.estimate.publish(answer.estimate)
         result = answer.result
-        if result is not None and images is not None and self.debug.get_subscription_count() > 0:
+        raw = self.debug.get_subscription_count() > 0
+        compressed = self.debug_compressed.get_subscription_count() > 0
+        if result is not None and images is not None and (raw or compressed):
             canvas = draw_result(*images, result, epipolar_lines)
-            self.debug.publish(numpy_to_image(canvas, "bgr8", answer.estimate.header))
+            header = answer.estimate.header
+            if raw:
+                self.debug.publish(numpy_to_image(canvas, "bgr8", header))
+            if compressed:
+                msg = numpy_to_compressed(canvas, "jpeg", header)
+                msg.format = DEBUG_COMPRESSED_FORMAT
+                self.debug_compressed.publish(msg)
         return publish_ms
 
     def report(self, stamp: Any, statuses: list[DiagnosticStatus]) -> None:
@@ -67,9 +84,10 @@ class NodeOutputs:
 
     def subscribers(self) -> dict[str, int]:
         """Matched subscribers: the fewest over the estimate and matches, and of
-        ~/debug_image."""
+        ~/debug_image (raw and compressed together)."""
         results = min(p.get_subscription_count() for p in (self.estimate, self.matches))
         return {
             "output_subscribers": results,
-            "debug_image_subscribers": self.debug.get_subscription_count(),
+            "debug_image_subscribers": self.debug.get_subscription_count()
+            + self.debug_compressed.get_subscription_count(),
         }

@@ -45,9 +45,9 @@ from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.session.parameters import (
     DIAGNOSTIC_PERIOD,
     ParamSpec,
-    adopt_renamed,
     descriptor,
     parameter_error,
+    renamed_values,
 )
 from sepfm_ros.ros.session.parameters import PARAMS as NODE_PARAMS
 from sepfm_ros.stream.pairing import Frame, StereoPairing
@@ -62,7 +62,7 @@ PENDING_ESTIMATES = 20
 
 _PARAMS: dict[str, ParamSpec] = {
     name: NODE_PARAMS[name]
-    for name in ("transport", "input_reliability", "sync_slop_s", "sync_queue_size")
+    for name in ("image_transport", "input_reliability", "sync_slop_s", "sync_queue_size")
 } | {
     "encoding": ParamSpec(
         "mono8", "encoding of the rectified images", choices=COLOR_SPACES, read_only=True
@@ -139,10 +139,12 @@ class RectifyNode(Node):
     ) -> None:
         super().__init__(node_name, **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
-        for text in adopt_renamed(self._parameter_overrides):  # an old name given: warn, use it
+        # values given under an old name: warned, and used unless the new name is given too
+        aliased, texts = renamed_values(getattr(self, "_parameter_overrides", {}), PARAMS)
+        for text in texts:
             self.get_logger().warning(text)
         for name, spec in PARAMS.items():
-            self.declare_parameter(name, spec.default, descriptor(name, spec))
+            self.declare_parameter(name, aliased.get(name, spec.default), descriptor(name, spec))
         self._values = {name: self.get_parameter(name).value for name in PARAMS}
         errors = [e for n, v in self._values.items() if (e := parameter_error(n, v, PARAMS))]
         if errors:
@@ -167,7 +169,7 @@ class RectifyNode(Node):
             self.create_publisher(Image, "right/image_rect", reliable),
         )
         self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
-        transport = self._values["transport"]
+        transport = self._values["image_transport"]
         msg_type = CompressedImage if transport == "compressed" else Image
         self._subs = [
             InputSubscription(

@@ -66,10 +66,10 @@ from sepfm_ros.ros.session.parameters import (
     DIAGNOSTIC_PERIOD,
     NODE_NAME,
     PARAMS,
-    adopt_renamed,
     change_errors,
     descriptor,
     parameter_error,
+    renamed_values,
 )
 from sepfm_ros.ros.session.session import Session, configure_pairing
 from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health
@@ -122,7 +122,7 @@ class SepfmNode(Node):
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
         values = self._declare_parameters()
         self._mode = values["mode"]
-        self._transport = values["transport"]
+        self._transport = values["image_transport"]
         self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
@@ -169,10 +169,12 @@ class SepfmNode(Node):
 
     def _declare_parameters(self) -> dict[str, Any]:
         """Declare every parameter; their values (ValueError listing the invalid ones)."""
-        for text in adopt_renamed(self._parameter_overrides):  # an old name given: warn, use it
+        # values given under an old name: warned, and used unless the new name is given too
+        aliased, texts = renamed_values(getattr(self, "_parameter_overrides", {}))
+        for text in texts:
             self.get_logger().warning(text)
         for name, spec in PARAMS.items():
-            self.declare_parameter(name, spec.default, descriptor(name, spec))
+            self.declare_parameter(name, aliased.get(name, spec.default), descriptor(name, spec))
         values = self._param_values()
         errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
         if errors:
@@ -300,6 +302,7 @@ class SepfmNode(Node):
             return False
         if getattr(msg, "step", None) == 0 and (note := self._zero_step.note(topic, msg)):
             self.get_logger().warning(note)
+        self._health.frame_stamp(topic, stamp_ns(msg.header.stamp))  # frames missing before it
         return True
 
     def _offer(self, job: Job) -> None:
@@ -434,9 +437,23 @@ class SepfmNode(Node):
         matched = self._session.match(decoded, job.key_a, job.key_b)
         return MatchedJob(job, matched, decoded.images, wait_ms, time.monotonic())
 
-    def _camera_infos(self) -> list[Any] | None:
-        """The latest camera_info of each camera (None: none yet, or camera_info not used)."""
-        return None if self._camera_info is None else self._camera_info.latest()
+    def _camera_infos(self, job: Job) -> list[Any] | None:
+        """The camera_info of each camera for the pair's images, matched by stamp (None: none
+        yet, or camera_info not used); an image without one is counted and logged."""
+        if self._camera_info is None:
+            return None
+        msgs = (job.msg_a, job.msg_b) if self._mode == "stereo" else (job.msg_b,)
+        stamps = [stamp_ns(m.header.stamp) for m in msgs]
+        slop_ns = int(round(float(self._session.values["sync_slop_s"]) * 1e9))
+        infos, missing = self._camera_info.for_stamps(stamps, slop_ns)
+        for k in missing:
+            self._log.log(
+                "camera_info_unmatched",
+                f"no camera_info on {self._camera_info.topics[k]} stamped within sync_slop_s of "
+                f"the image stamped {stamps[k] / 1e9:.3f} s: answered with the latest one",
+                error=False,
+            )
+        return infos
 
     def _log_cameras(self, update: CamerasUpdate | None) -> None:
         """Count and log unusable camera_info; log a calibration newly in use."""
@@ -465,7 +482,7 @@ class SepfmNode(Node):
         answer = self._session.answer_matched(
             job.headers(),
             item.matched,
-            self._camera_infos(),
+            self._camera_infos(job),
             {"wait": item.wait_ms, "queue": queue_ms},
         )
         self._log_cameras(answer.cameras_update)
@@ -498,9 +515,7 @@ class SepfmNode(Node):
             values[f"input_qos_switches_to_{kind}"] = switches.get(kind, 0)
         values["dds_input_transport"] = self._dds.describe()
         if self._camera_info is not None:
-            # 1 once every camera's camera_info has arrived (a player can wait for it before the
-            # first images, so the first pair is answered with the calibration too)
-            values["camera_info_ready"] = int(self._camera_info.latest() is not None)
+            values.update(self._camera_info.diagnostic_values())
         # subscribers matched by the result publishers (the fewest over estimate and matches) and by
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())

@@ -3,7 +3,7 @@ receives what the publishers offer.
 
 - Names: the base topic (``left/image_raw``) is resolved first, with the node's namespace and
   remaps, and ``/compressed`` is added after, as image_transport does; so
-  ``-r left/image_raw:=/cam/left/image_raw transport:=compressed`` subscribes to
+  ``-r left/image_raw:=/cam/left/image_raw image_transport:=compressed`` subscribes to
   ``/cam/left/image_raw/compressed``.
 - Reliability ``auto`` (default): the subscription is created when the first publishers appear,
   reliable when all of them publish reliable and best-effort otherwise, as ``ros2 bag record``

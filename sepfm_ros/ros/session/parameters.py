@@ -42,7 +42,7 @@ _MONITOR = MonitorConfig()  # the calibration check's defaults
 DIAGNOSTIC_PERIOD = "diagnostic_updater.period"
 # old name -> current name. An old name still sets its parameter (``-p``, params files, the
 # node's overrides), with a warning that names the current one.
-RENAMED_PARAMS = {"diagnostics_period_s": DIAGNOSTIC_PERIOD}
+RENAMED_PARAMS = {"diagnostics_period_s": DIAGNOSTIC_PERIOD, "transport": "image_transport"}
 
 
 def renamed_text(old: str) -> str:
@@ -57,26 +57,34 @@ def renamed_help() -> str:
     )
 
 
-def current_name(name: str) -> str:
-    """``name``, or the current name of a renamed parameter (with a FutureWarning)."""
+def current_name(name: str, warn: bool = True) -> str:
+    """``name``, or the current name of a renamed parameter (with a FutureWarning if ``warn``)."""
     if name not in RENAMED_PARAMS:
         return name
-    warnings.warn(renamed_text(name), FutureWarning, stacklevel=3)
+    if warn:
+        warnings.warn(renamed_text(name), FutureWarning, stacklevel=3)
     return RENAMED_PARAMS[name]
 
 
-def adopt_renamed(overrides: dict[str, Any]) -> list[str]:
-    """Move the values of renamed parameters in a node's ``overrides`` (name -> rclpy
-    Parameter, from ``-p`` and params files) to their current names, unless those are set
-    too; the warnings to log (one per old name given)."""
-    texts = []
+def renamed_values(
+    overrides: Mapping[str, Any], params: Mapping[str, ParamSpec] | None = None
+) -> tuple[dict[str, Any], list[str]]:
+    """A node's values given under an old name (``overrides``: rclpy's parameter overrides,
+    name -> Parameter or value, from ``-p`` and params files): ({current name: value} for those
+    of ``params`` (default :data:`PARAMS`) not given under their own name, the warnings to
+    log, one per old name given)."""
+    params = PARAMS if params is None else params
+    values: dict[str, Any] = {}
+    texts: list[str] = []
     for old, new in RENAMED_PARAMS.items():
-        if old in overrides:
+        if old not in overrides or new not in params:
+            continue
+        if new in overrides:
+            texts.append(f"{renamed_text(old)}; ignored, {new} is given")
+        else:
             texts.append(renamed_text(old))
-            param = overrides.pop(old)
-            if new not in overrides:
-                overrides[new] = type(param)(new, value=param.value)
-    return texts
+            values[new] = getattr(overrides[old], "value", overrides[old])
+    return values, texts
 
 
 @dataclass(frozen=True)
@@ -98,9 +106,10 @@ PARAMS: dict[str, ParamSpec] = {
         choices=MODES,
         read_only=True,
     ),
-    "transport": ParamSpec(
+    "image_transport": ParamSpec(
         "raw",
-        "raw: sensor_msgs/Image; compressed: sensor_msgs/CompressedImage on <topic>/compressed",
+        "image_transport's TransportHints: raw = sensor_msgs/Image on <topic>; compressed ="
+        " sensor_msgs/CompressedImage on <topic>/compressed (jpeg, png)",
         choices=TRANSPORTS,
         read_only=True,
     ),
@@ -344,6 +353,7 @@ class GivenParams:
 
 def parse_value(name: str, text: str) -> Any:
     """The value of parameter ``name`` written as ``text`` (``-p name:=text``), validated."""
+    name = current_name(name, warn=False)
     if name not in PARAMS:
         raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
     default = PARAMS[name].default
@@ -366,6 +376,7 @@ def parse_value(name: str, text: str) -> Any:
 def checked(name: str, value: Any) -> Any:
     """``value`` for parameter ``name`` as the node takes it (an integer where a float is
     expected becomes a float); ParameterError when it is not acceptable."""
+    name = current_name(name, warn=False)
     if name not in PARAMS:
         raise ParameterError(f"unknown parameter {name!r}; known: {', '.join(PARAMS)}")
     default = PARAMS[name].default

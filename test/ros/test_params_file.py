@@ -6,7 +6,12 @@ from __future__ import annotations
 import pytest
 from ground_truth import REPO_ROOT
 
-from sepfm_ros.ros.session.parameters import PARAMS, ParameterError, given_params
+from sepfm_ros.ros.session.parameters import (
+    DIAGNOSTIC_PERIOD,
+    PARAMS,
+    ParameterError,
+    given_params,
+)
 
 
 def test_the_shipped_params_file_holds_the_defaults():
@@ -51,3 +56,17 @@ def test_p_items_are_checked_as_the_node_checks_them():
         given_params(["features:=surf"])
     with pytest.raises(ParameterError, match="name:=value"):
         given_params(["features=sift"])
+
+
+def test_the_diagnostics_period_is_diagnostic_updaters_and_the_old_name_warns(tmp_path):
+    path = tmp_path / "params.yaml"
+    # nested as diagnostic_updater's own params files write it
+    path.write_text("/**:\n  ros__parameters:\n    diagnostic_updater:\n      period: 0.5\n")
+    assert given_params(params_file=path).values[DIAGNOSTIC_PERIOD] == 0.5
+    path.write_text("/**:\n  ros__parameters:\n    diagnostics_period_s: 0.25\n")
+    with pytest.warns(FutureWarning, match="diagnostics_period_s is renamed"):
+        given = given_params(params_file=path)
+    assert given.values[DIAGNOSTIC_PERIOD] == 0.25 and "diagnostics_period_s" not in given.values
+    with pytest.warns(FutureWarning, match="diagnostic_updater.period"):
+        given = given_params(["diagnostics_period_s:=2.0"])
+    assert given.values[DIAGNOSTIC_PERIOD] == 2.0 and given.given == {DIAGNOSTIC_PERIOD}

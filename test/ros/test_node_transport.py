@@ -147,3 +147,13 @@ def test_frames_missing_from_the_stamp_sequence_are_counted_and_warned(node, sha
         log = list(client.health_log)
     warned = [m for _, level, m in log if level == WARN and "missing from the camera stamp" in m]
     assert warned, log[-3:]
+
+
+def test_old_name_in_process_parameters_warns(capsys):
+    """``process``/``demo`` take the node's ``-p`` items: the old name sets image_transport."""
+    from sepfm_ros.ros.session.parameters import given_params
+
+    given = given_params(["transport:=compressed"])
+    assert given.values["image_transport"] == "compressed"
+    assert "image_transport" in given.given and "transport" not in given.values
+    assert "'transport' is an old name of 'image_transport'" in capsys.readouterr().err

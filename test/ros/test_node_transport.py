@@ -149,11 +149,11 @@ def test_frames_missing_from_the_stamp_sequence_are_counted_and_warned(node, sha
     assert warned, log[-3:]
 
 
-def test_old_name_in_process_parameters_warns(capsys):
+def test_old_name_in_process_parameters_warns():
     """``process``/``demo`` take the node's ``-p`` items: the old name sets image_transport."""
     from sepfm_ros.ros.session.parameters import given_params
 
-    given = given_params(["transport:=compressed"])
+    with pytest.warns(FutureWarning, match="parameter transport is renamed image_transport"):
+        given = given_params(["transport:=compressed"])
     assert given.values["image_transport"] == "compressed"
     assert "image_transport" in given.given and "transport" not in given.values
-    assert "'transport' is an old name of 'image_transport'" in capsys.readouterr().err

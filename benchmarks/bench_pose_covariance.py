@@ -1,0 +1,158 @@
+"""Benchmark: does the relative pose's covariance bound its error against ground truth?
+
+Pairs: kitti_seq2 left frames 1, 2 and 4 apart, and consecutive templeRing views
+(../shared/data/cameras.json holds every camera: K, R, t of each image). Matches: the node's
+pipeline, default config; pose: :func:`sepfm_ros.geometry.pose.relative_pose` with the GT
+intrinsics and its covariance (:mod:`sepfm_ros.geometry.calibrated.pose_covariance`).
+
+Per pair: the rotation error (the rotation vector delta with R_est = exp(delta) R_gt) and the
+translation-direction error (the tangent vector eta from t_est to t_gt), and the 95% bound the
+covariance sets on each along the error's own direction: the radius of the ellipsoid
+``x^T C^-1 x = chi2_k(0.95)`` (k = 3 for the rotation, 2 for the direction). The error is
+covered when it lies within that ellipsoid. Printed per set and in all: the share of pairs
+covered (target >= 90%) and the median bound over the median error (target <= 3).
+
+    python benchmarks/bench_pose_covariance.py [--write-docs]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import cv2
+import numpy as np
+from scipy.stats import chi2
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_docs  # noqa: E402
+
+from sepfm_ros.geometry.calibrated.pose import (  # noqa: E402
+    pose_from_projections,
+    relative_pose,
+)
+from sepfm_ros.geometry.calibrated.pose_covariance import (  # noqa: E402
+    direction_error,
+    rotation_error,
+)
+from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig  # noqa: E402
+
+DATA = bench_docs.REPO.parent / "shared" / "data"
+CHI2_ROT, CHI2_DIR = chi2.ppf(0.95, 3), chi2.ppf(0.95, 2)
+TARGET_COVERED, TARGET_RATIO = 0.90, 3.0
+
+
+def pair_sets(cams: dict) -> dict[str, list[tuple[str, str]]]:
+    left = sorted(k for k in cams if k.startswith("kitti_seq2/left/"))
+    temple = sorted(k for k in cams if k.startswith("templeRing/"))
+    sets = {
+        f"KITTI, {g} apart": [(left[i], left[i + g]) for i in range(len(left) - g)]
+        for g in (1, 2, 4)
+    }
+    sets["templeRing, consecutive"] = [(temple[i], temple[i + 1]) for i in range(len(temple) - 1)]
+    return sets
+
+
+def evaluate_pair(pipe: Pipeline, cams: dict, a: str, b: str) -> dict | None:
+    """Errors and bounds (deg) of one pair, None when it gives no pose with a covariance."""
+    img_a = cv2.imread(str(DATA / a), cv2.IMREAD_GRAYSCALE)
+    img_b = cv2.imread(str(DATA / b), cv2.IMREAD_GRAYSCALE)
+    K_a, K_b, R_gt, t_gt = pose_from_projections(np.array(cams[a]), np.array(cams[b]))
+    res = pipe.process(img_a, img_b)
+    if res.estimate.F is None:
+        return None
+    pa, pb = res.matches.pts_a, res.matches.pts_b
+    pose = relative_pose(res.estimate.F, pa, pb, K_a, K_b, res.estimate.inliers)
+    c = pose.covariance
+    if not pose.ok or c is None:
+        return None
+    d = rotation_error(pose.R, R_gt)
+    e = direction_error(pose.t, t_gt, c.basis)
+    return {
+        "rot_err": float(np.degrees(np.linalg.norm(d))),
+        "rot_bound": c.rotation_bound_deg(d, CHI2_ROT),
+        "dir_err": float(np.degrees(np.linalg.norm(e))),
+        "dir_bound": c.direction_bound_deg(e, CHI2_DIR),
+        "sigma_px": c.sigma_px,
+        "n": c.n_points,
+    }
+
+
+def summary(rows: list[dict], kind: str) -> tuple[float, float]:
+    """(share covered, median bound / median error) of ``kind`` ("rot" or "dir")."""
+    err = np.array([r[f"{kind}_err"] for r in rows])
+    bound = np.array([r[f"{kind}_bound"] for r in rows])
+    return float(np.mean(err <= bound)), float(np.median(bound) / np.median(err))
+
+
+def table(results: dict[str, list[dict]], failed: dict[str, int]) -> list[str]:
+    lines = [
+        "| pairs | with a covariance | median inliers | median sigma (px) | rotation: median "
+        "error / 95% bound (deg) | covered | bound / error | direction: median error / 95% "
+        "bound (deg) | covered | bound / error |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    every = [r for rows in results.values() for r in rows]
+    for name, rows in [*results.items(), ("all", every)]:
+        n_fail = sum(failed.values()) if name == "all" else failed[name]
+        cr, rr = summary(rows, "rot")
+        cd, rd = summary(rows, "dir")
+        med = {k: np.median([r[k] for r in rows]) for k in rows[0]}
+        lines.append(
+            f"| {name} | {len(rows)} of {len(rows) + n_fail} | {med['n']:.0f} | "
+            f"{med['sigma_px']:.2f} | {med['rot_err']:.3f} / {med['rot_bound']:.3f} | "
+            f"{cr:.0%} | {rr:.2f} | {med['dir_err']:.2f} / {med['dir_bound']:.2f} | {cd:.0%} | "
+            f"{rd:.2f} |"
+        )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC)
+    ap.add_argument("--write-docs", action="store_true", help="rewrite its docs section")
+    args = ap.parse_args(argv)
+    cams = json.loads((DATA / "cameras.json").read_text())
+    pipe = Pipeline(PipelineConfig())
+    t0 = time.perf_counter()
+    results: dict[str, list[dict]] = {}
+    failed: dict[str, int] = {}
+    for name, pairs in pair_sets(cams).items():
+        rows = [evaluate_pair(pipe, cams, a, b) for a, b in pairs]
+        results[name] = [r for r in rows if r is not None]
+        failed[name] = sum(r is None for r in rows)
+    every = [r for rows in results.values() for r in rows]
+    (cr, rr), (cd, rd) = summary(every, "rot"), summary(every, "dir")
+    ok = min(cr, cd) >= TARGET_COVERED and max(rr, rd) <= TARGET_RATIO
+    text = "\n".join(
+        [
+            "Node pipeline matches (default config), GT intrinsics and poses from cameras.json; "
+            "the pose and its covariance as the node computes them. Per pair, the 95% bound is "
+            "the radius of the covariance's 95% ellipsoid (chi-square, 3 dof for the rotation, 2 "
+            "for the direction) along the error; 'covered': share of pairs whose error is "
+            "within it (target >= 90%); 'bound / error': median bound over median error "
+            "(target <= 3).",
+            "",
+            *table(results, failed),
+            "",
+            f"All pairs: rotation covered {cr:.0%}, bound / error {rr:.2f}; direction covered "
+            f"{cd:.0%}, bound / error {rd:.2f}: targets {'met' if ok else 'NOT met'}. Run "
+            f"time {time.perf_counter() - t0:.0f} s.",
+        ]
+    )
+    print(text)
+    if args.write_docs:
+        command = bench_docs.command_line("bench_pose_covariance.py", argv)
+        section = bench_docs.section(
+            "bench_pose_covariance", "Relative pose covariance against ground truth", command, text
+        )
+        path = bench_docs.write_section("bench_pose_covariance", section, args.doc)
+        print(f"wrote {path}", file=sys.stderr)
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

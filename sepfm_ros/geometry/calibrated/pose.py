@@ -66,9 +66,7 @@ class RelativePose:
         """The same pose with ``t`` scaled to length ``baseline`` (e.g. metres of a stereo rig)."""
         n = float(np.linalg.norm(self.t))
         t = self.t * (baseline / n) if n > 0 else self.t
-        return RelativePose(
-            self.R, t, self.in_front, self.n_points, self.status, self.covariance
-        )
+        return RelativePose(self.R, t, self.in_front, self.n_points, self.status, self.covariance)
 
 
 def essential_from_fundamental(F: np.ndarray, K_a: np.ndarray, K_b: np.ndarray) -> np.ndarray:

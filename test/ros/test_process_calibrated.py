@@ -80,6 +80,28 @@ def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_pat
         est = estimates[stamp_ns(tf.header.stamp)]
         assert est.pose == tf.transform and est.pose_kind == TwoViewEstimate.POSE_METRIC
         assert est.coordinates == "undistorted" and est.pose_status == "ok"
+    # ~/relative_pose: the same pose with a positive-definite covariance, stamped alike
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    with BagReader(tmp_path / "out") as reader:
+        with_cov = {
+            stamp_ns(m.header.stamp): m
+            for m in (
+                deserialize_message(r.data, PoseWithCovarianceStamped)
+                for r in reader.messages(["/sepfm/relative_pose"])
+            )
+        }
+    assert sorted(with_cov) == sorted(stamp_ns(tf.header.stamp) for tf in poses)
+    for tf in poses:
+        msg = with_cov[stamp_ns(tf.header.stamp)]
+        assert msg.header.frame_id == tf.header.frame_id
+        p = msg.pose.pose.position
+        assert [p.x, p.y, p.z] == [
+            tf.transform.translation.x,
+            tf.transform.translation.y,
+            tf.transform.translation.z,
+        ]
+        assert np.all(np.linalg.eigvalsh(np.reshape(msg.pose.covariance, (6, 6))) > 0)
 
 
 def test_process_on_rectified_images_says_so(kitti, tmp_path):

@@ -154,3 +154,33 @@ def test_per_frame_camera_info_recomputed_to_rounding_is_one_calibration(shared_
     assert done == total == 8
     _, checks = _outputs(tmp_path / "out")
     assert checks[-1].level == b"\x00", checks[-1].message  # OK
+
+
+def test_process_motion_writes_angular_velocity_and_direction_not_a_transform(kitti, tmp_path):
+    from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
+
+    from sepfm_ros.ros.offline.process import ProcessInputs
+
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames[:4], K=K, baseline_m=baseline)
+    choice = ProcessInputs(mode="motion", image="/camera/left/image_raw")
+    done, _ = run_process(bag, tmp_path / "out", parse_params([]), choice, progress=False)
+    assert done == 3
+    with BagReader(tmp_path / "out") as reader:
+        assert "/sepfm/relative_transform" not in reader.topics
+        assert "/sepfm/relative_pose" not in reader.topics
+        twists = [
+            deserialize_message(r.data, TwistWithCovarianceStamped)
+            for r in reader.messages(["/sepfm/angular_velocity"])
+        ]
+        directions = [
+            deserialize_message(r.data, Vector3Stamped)
+            for r in reader.messages(["/sepfm/translation_direction"])
+        ]
+    assert len(twists) == len(directions) == 3
+    for twist, direction in zip(twists, directions, strict=True):
+        assert twist.header.frame_id == direction.header.frame_id == "left_camera_optical_frame"
+        assert np.all(np.linalg.eigvalsh(np.reshape(twist.twist.covariance, (6, 6))) > 0)
+        d = direction.vector
+        assert np.linalg.norm([d.x, d.y, d.z]) == pytest.approx(1.0)
+        assert d.z > 0.9  # KITTI drives forward

@@ -39,6 +39,7 @@ SECTIONS = {
     "bench_audit": "python benchmarks/bench_audit.py --write-docs",
     "bench_rigs": "python benchmarks/bench_rigs.py --write-docs",
     "bench_netns": "python benchmarks/bench_netns.py --write-docs",
+    "bench_pose_covariance": "python benchmarks/bench_pose_covariance.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

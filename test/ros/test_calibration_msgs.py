@@ -101,3 +101,54 @@ def test_calibration_check_message_is_stamped_with_the_pair():
     # readers take the array and 0.1.0's bare status alike
     assert calibration_check_statuses(msg) == [st]
     assert calibration_check_statuses(st) == [st]
+
+
+def _pose_with_covariance():
+    from sepfm_ros.geometry.calibrated.pose import pose_from_projections, relative_pose
+    from sepfm_ros.geometry.synthetic import make_pair
+
+    pair = make_pair(n_inliers=150, noise=0.5, seed=2)
+    K_a, K_b, _, _ = pose_from_projections(pair.P1, pair.P2)
+    from sepfm_ros.geometry import estimate_fundamental
+
+    est = estimate_fundamental(pair.pts1, pair.pts2, pair.image_size, seed=0)
+    pose = relative_pose(est.F, pair.pts1, pair.pts2, K_a, K_b, est.inliers)
+    assert pose.ok and pose.covariance is not None
+    return pose
+
+
+def test_pose_messages_frames_units_and_covariance():
+    from sepfm_ros.geometry.calibrated.pose_covariance import pose_in_a_covariance
+    from sepfm_ros.ros.msgs.calibration import (
+        angular_velocity_message,
+        relative_pose_message,
+        translation_direction_message,
+    )
+
+    pose = _pose_with_covariance().scaled(0.5)
+    header = Header(frame_id="ignored")
+    header.stamp.sec = 7
+    msg = relative_pose_message(pose, header, "left_optical")
+    tf = relative_transform(pose, header, "left_optical", "right_optical")
+    assert msg.header.frame_id == "left_optical" and msg.header.stamp.sec == 7
+    p = msg.pose.pose.position
+    assert [p.x, p.y, p.z] == [
+        tf.transform.translation.x,
+        tf.transform.translation.y,
+        tf.transform.translation.z,
+    ]
+    C = np.reshape(msg.pose.covariance, (6, 6))
+    assert np.allclose(C, pose_in_a_covariance(pose.covariance, 0.5))
+    assert np.all(np.linalg.eigvalsh(C) > 0)
+    # a moving camera: rotation over the seconds between the frames, in rad/s
+    twist = angular_velocity_message(pose, header, "camera_optical", 0.1)
+    w = twist.twist.twist.angular
+    expected = Rotation.from_matrix(pose.R.T).as_rotvec() / 0.1
+    assert np.allclose([w.x, w.y, w.z], expected)
+    Ct = np.reshape(twist.twist.covariance, (6, 6))
+    assert np.allclose(Ct[3:, 3:], pose.covariance.rotation_in_a() / 0.01)
+    assert np.all(np.linalg.eigvalsh(Ct) > 0) and twist.header.frame_id == "camera_optical"
+    assert angular_velocity_message(pose, header, "camera_optical", 0.0) is None
+    d = translation_direction_message(pose, header, "camera_optical").vector
+    expected_d = -pose.R.T @ pose.t / np.linalg.norm(pose.t)
+    assert np.allclose([d.x, d.y, d.z], expected_d)

@@ -83,6 +83,28 @@ def test_process_writes_pose_and_an_ok_check_for_a_calibrated_rig(kitti, tmp_pat
         est = estimates[stamp_ns(tf.header.stamp)]
         assert est.pose == tf.transform and est.pose_kind == TwoViewEstimate.POSE_METRIC
         assert est.coordinates == "undistorted" and est.pose_status == "ok"
+    # ~/relative_pose: the same pose with a positive-definite covariance, stamped alike
+    from geometry_msgs.msg import PoseWithCovarianceStamped
+
+    with BagReader(tmp_path / "out") as reader:
+        with_cov = {
+            stamp_ns(m.header.stamp): m
+            for m in (
+                deserialize_message(r.data, PoseWithCovarianceStamped)
+                for r in reader.messages(["/sepfm/relative_pose"])
+            )
+        }
+    assert sorted(with_cov) == sorted(stamp_ns(tf.header.stamp) for tf in poses)
+    for tf in poses:
+        msg = with_cov[stamp_ns(tf.header.stamp)]
+        assert msg.header.frame_id == tf.header.frame_id
+        p = msg.pose.pose.position
+        assert [p.x, p.y, p.z] == [
+            tf.transform.translation.x,
+            tf.transform.translation.y,
+            tf.transform.translation.z,
+        ]
+        assert np.all(np.linalg.eigvalsh(np.reshape(msg.pose.covariance, (6, 6))) > 0)
 
 
 def test_process_on_rectified_images_says_so(kitti, tmp_path):
@@ -135,3 +157,33 @@ def test_per_frame_camera_info_recomputed_to_rounding_is_one_calibration(shared_
     assert done == total == 8
     _, checks = _outputs(tmp_path / "out")
     assert checks[-1].level == b"\x00", checks[-1].message  # OK
+
+
+def test_process_motion_writes_angular_velocity_and_direction_not_a_transform(kitti, tmp_path):
+    from geometry_msgs.msg import TwistWithCovarianceStamped, Vector3Stamped
+
+    from sepfm_ros.ros.offline.process import ProcessInputs
+
+    K, baseline, frames = kitti
+    bag = write_robot_bag(bag_path(tmp_path, "mcap"), "mcap", frames[:4], K=K, baseline_m=baseline)
+    choice = ProcessInputs(mode="motion", image="/camera/left/image_raw")
+    done, _ = run_process(bag, tmp_path / "out", parse_params([]), choice, progress=False)
+    assert done == 3
+    with BagReader(tmp_path / "out") as reader:
+        assert "/sepfm/relative_transform" not in reader.topics
+        assert "/sepfm/relative_pose" not in reader.topics
+        twists = [
+            deserialize_message(r.data, TwistWithCovarianceStamped)
+            for r in reader.messages(["/sepfm/angular_velocity"])
+        ]
+        directions = [
+            deserialize_message(r.data, Vector3Stamped)
+            for r in reader.messages(["/sepfm/translation_direction"])
+        ]
+    assert len(twists) == len(directions) == 3
+    for twist, direction in zip(twists, directions, strict=True):
+        assert twist.header.frame_id == direction.header.frame_id == "left_camera_optical_frame"
+        assert np.all(np.linalg.eigvalsh(np.reshape(twist.twist.covariance, (6, 6))) > 0)
+        d = direction.vector
+        assert np.linalg.norm([d.x, d.y, d.z]) == pytest.approx(1.0)
+        assert d.z > 0.9  # KITTI drives forward

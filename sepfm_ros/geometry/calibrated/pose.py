@@ -20,6 +20,11 @@ from scipy.optimize import least_squares
 from scipy.spatial.transform import Rotation
 
 from sepfm_ros.geometry.calibrated.camera import CameraModel
+from sepfm_ros.geometry.calibrated.pose_covariance import (
+    PoseCovariance,
+    pose_covariance,
+    sampson_residuals,
+)
 from sepfm_ros.geometry.epipolar import homogeneous, normalize_fundamental, skew
 
 # A relative pose is reported when at least this many inliers lie in front of both cameras.
@@ -36,6 +41,9 @@ class RelativePose:
         in_front: share of the used inliers in front of both cameras, in [0, 1].
         n_points: inliers used.
         status: "ok" or the reason there is no usable pose (then R = I, t = 0).
+        covariance: the covariance of R and t's direction from the pose's inliers
+            (:mod:`~sepfm_ros.geometry.calibrated.pose_covariance`), None when they do not
+            determine it.
     """
 
     R: np.ndarray
@@ -43,6 +51,7 @@ class RelativePose:
     in_front: float
     n_points: int
     status: str = "ok"
+    covariance: PoseCovariance | None = None
 
     @property
     def ok(self) -> bool:
@@ -57,7 +66,7 @@ class RelativePose:
         """The same pose with ``t`` scaled to length ``baseline`` (e.g. metres of a stereo rig)."""
         n = float(np.linalg.norm(self.t))
         t = self.t * (baseline / n) if n > 0 else self.t
-        return RelativePose(self.R, t, self.in_front, self.n_points, self.status)
+        return RelativePose(self.R, t, self.in_front, self.n_points, self.status, self.covariance)
 
 
 def essential_from_fundamental(F: np.ndarray, K_a: np.ndarray, K_b: np.ndarray) -> np.ndarray:
@@ -99,23 +108,6 @@ def in_front_mask(R: np.ndarray, t: np.ndarray, na: np.ndarray, nb: np.ndarray) 
     return np.isfinite(za) & np.isfinite(zb) & (za > 0) & (zb > 0)
 
 
-def _sampson_residuals(
-    R: np.ndarray,
-    t: np.ndarray,
-    xa: np.ndarray,
-    xb: np.ndarray,
-    Ka_inv: np.ndarray,
-    Kb_inv: np.ndarray,
-) -> np.ndarray:
-    """Signed Sampson distances (px) of homogeneous pixel matches xa, xb (N, 3)."""
-    F = Kb_inv.T @ skew(t) @ R @ Ka_inv
-    Fx = xa @ F.T
-    Ftx = xb @ F
-    r = np.einsum("ij,ij->i", xb, Fx)
-    den = np.sqrt(Fx[:, 0] ** 2 + Fx[:, 1] ** 2 + Ftx[:, 0] ** 2 + Ftx[:, 1] ** 2)
-    return r / np.maximum(den, 1e-12)
-
-
 def refine_pose(
     R: np.ndarray,
     t: np.ndarray,
@@ -152,7 +144,7 @@ def refine_pose(
         return Rp, tp / np.linalg.norm(tp)
 
     def fun(p: np.ndarray) -> np.ndarray:
-        return _sampson_residuals(*unpack(p), xa, xb, Ka_inv, Kb_inv)
+        return sampson_residuals(*unpack(p), xa, xb, Ka_inv, Kb_inv)
 
     n_params = 3 if fix_translation else 5
     sol = least_squares(
@@ -214,21 +206,37 @@ def relative_pose(
         return RelativePose(
             np.eye(3), np.zeros(3), float(front.mean()), n, "no pose puts the inliers in front"
         )
+    used_a, used_b = pa[front], pb[front]
     if refine:
-        R, t = refine_pose(R, t, pa[front], pb[front], K_a, K_b, scale_px)
+        R, t = refine_pose(R, t, used_a, used_b, K_a, K_b, scale_px)
         # the essential model (5 dof) is stricter than F (7 dof): re-select the inliers of all
         # matches under it (Sampson distance within scale_px, in front) and refit, twice
-        xa, xb = homogeneous(pts_a), homogeneous(pts_b)
-        Ka_inv, Kb_inv = np.linalg.inv(K_a), np.linalg.inv(K_b)
-        all_na, all_nb = normalized_points(K_a, pts_a), normalized_points(K_b, pts_b)
         for _ in range(reselect):
-            d = np.abs(_sampson_residuals(R, t, xa, xb, Ka_inv, Kb_inv))
-            sel = (d < scale_px) & in_front_mask(R, t, all_na, all_nb)
+            sel = pose_inliers(R, t, pts_a, pts_b, K_a, K_b, scale_px)
             if np.count_nonzero(sel) < MIN_POSE_POINTS:
                 break
-            R, t = refine_pose(R, t, pts_a[sel], pts_b[sel], K_a, K_b, scale_px)
+            used_a, used_b = pts_a[sel], pts_b[sel]
+            R, t = refine_pose(R, t, used_a, used_b, K_a, K_b, scale_px)
         front = in_front_mask(R, t, na, nb)
-    return RelativePose(R, t / np.linalg.norm(t), float(front.mean()), n)
+    t = t / np.linalg.norm(t)
+    covariance = pose_covariance(R, t, used_a, used_b, K_a, K_b, scale_px)
+    return RelativePose(R, t, float(front.mean()), n, covariance=covariance)
+
+
+def pose_inliers(
+    R: np.ndarray,
+    t: np.ndarray,
+    pts_a: np.ndarray,
+    pts_b: np.ndarray,
+    K_a: np.ndarray,
+    K_b: np.ndarray,
+    scale_px: float,
+) -> np.ndarray:
+    """(N,) bool: matches within ``scale_px`` (Sampson, px) of the pose and in front of both."""
+    xa, xb = homogeneous(pts_a), homogeneous(pts_b)
+    d = np.abs(sampson_residuals(R, t, xa, xb, np.linalg.inv(K_a), np.linalg.inv(K_b)))
+    na, nb = normalized_points(K_a, pts_a), normalized_points(K_b, pts_b)
+    return np.asarray((d < scale_px) & in_front_mask(R, t, na, nb))
 
 
 def rotation_angle_deg(R: np.ndarray) -> float:

@@ -46,12 +46,18 @@ def output_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
 
 
 def calibrated_topics(namespace: str = OUTPUT_NAMESPACE) -> dict[str, str]:
-    """kind -> topic of the node's outputs with camera_info (pose and calibration check)."""
+    """kind -> topic of the node's outputs with camera_info (pose outputs and calibration
+    check): ``relative_transform`` and ``relative_pose`` of a stereo rig, ``angular_velocity``
+    and ``translation_direction`` of a moving camera."""
     ns = namespace.rstrip("/")
-    return {
-        "relative_transform": f"{ns}/relative_transform",
-        "calibration_check": f"{ns}/calibration_check",
-    }
+    kinds = (
+        "relative_transform",
+        "relative_pose",
+        "angular_velocity",
+        "translation_direction",
+        "calibration_check",
+    )
+    return {kind: f"{ns}/{kind}" for kind in kinds}
 
 
 @dataclass(frozen=True)

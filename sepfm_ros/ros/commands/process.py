@@ -15,9 +15,11 @@ The command runs the node's
 the node's parameter names, e.g. ``-p seed:=0 -p method:=sep5``) and writes
 the node's outputs with the source stamps to OUT: ``/sepfm/estimate`` (sepfm_msgs/TwoViewEstimate,
 one per pair, a failure record for a pair that cannot be used), ``/sepfm/matches``
-(sepfm_msgs/MatchArray), with camera_info ``/sepfm/relative_transform`` and
-``/sepfm/calibration_check`` (diagnostic_msgs/DiagnosticArray stamped with the pair's header;
-plus a copy of ``/ground_truth/fundamental`` when BAG has it),
+(sepfm_msgs/MatchArray), with camera_info the pose (stereo: ``/sepfm/relative_transform``
+and ``/sepfm/relative_pose``; motion: ``/sepfm/angular_velocity`` and
+``/sepfm/translation_direction``) and ``/sepfm/calibration_check``
+(diagnostic_msgs/DiagnosticArray stamped with the pair's header; plus a copy of
+``/ground_truth/fundamental`` when BAG has it),
 logged at the log time of the input message that completed each pair, so OUT plays in step
 with BAG. The answers are the node's (:mod:`sepfm_ros.ros.session.answer`).
 

@@ -5,6 +5,12 @@
   the reason).
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
+- :func:`relative_pose_message`: the same pose with its covariance ->
+  ``geometry_msgs/PoseWithCovarianceStamped`` (stereo, ``~/relative_pose``);
+- :func:`angular_velocity_message` and :func:`translation_direction_message`: one moving
+  camera's rotation between two frames as an angular velocity with covariance
+  (``geometry_msgs/TwistWithCovarianceStamped``, ``~/angular_velocity``) and the unit direction
+  of its motion (``geometry_msgs/Vector3Stamped``, ``~/translation_direction``);
 - :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``
   named ``<node FQN>: calibration``.
 - :func:`calibration_check_message`: that status stamped with its pair's header, as the
@@ -17,14 +23,29 @@ from __future__ import annotations
 
 from typing import Any
 
+import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Quaternion, Transform, TransformStamped, Vector3
+from geometry_msgs.msg import (
+    Point,
+    Pose,
+    PoseWithCovariance,
+    PoseWithCovarianceStamped,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    Twist,
+    TwistWithCovariance,
+    TwistWithCovarianceStamped,
+    Vector3,
+    Vector3Stamped,
+)
 from scipy.spatial.transform import Rotation
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
 from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
+from sepfm_ros.geometry.calibrated.pose_covariance import pose_in_a_covariance
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, status_name
 from sepfm_ros.ros.msgs.headers import copy_header
 
@@ -76,6 +97,79 @@ def relative_transform(
             translation=Vector3(x=float(p_ba[0]), y=float(p_ba[1]), z=float(p_ba[2])),
             rotation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
         ),
+    )
+
+
+# variance ((m/s)^2) of the angular-velocity message's linear part: the camera's velocity is not
+# measured by one camera's two frames (robot_localization: fuse only vroll, vpitch, vyaw)
+UNKNOWN_VELOCITY_VARIANCE = 1e6
+
+
+def _stamped(header: Header, frame_id: str) -> Header:
+    hdr = copy_header(header)
+    hdr.frame_id = frame_id
+    return hdr
+
+
+def relative_pose_message(
+    pose: RelativePose, header: Header, frame_a: str
+) -> PoseWithCovarianceStamped | None:
+    """The pose of camera b in camera a's optical frame with its covariance (stereo: t in
+    metres of the calibrated baseline), or None when the pose has no covariance.
+
+    Covariance: row-major 6x6 over (x, y, z) in metres and rotations about a's fixed x, y, z
+    axes in radians (:func:`~sepfm_ros.geometry.calibrated.pose_covariance.pose_in_a_covariance`).
+    """
+    if pose.covariance is None:
+        return None
+    R_ba, p_ba = pose_of_b_in_a(pose.R, pose.t)
+    x, y, z, w = Rotation.from_matrix(R_ba).as_quat()
+    cov = pose_in_a_covariance(pose.covariance, float(np.linalg.norm(pose.t)))
+    return PoseWithCovarianceStamped(
+        header=_stamped(header, frame_a),
+        pose=PoseWithCovariance(
+            pose=Pose(
+                position=Point(x=float(p_ba[0]), y=float(p_ba[1]), z=float(p_ba[2])),
+                orientation=Quaternion(x=float(x), y=float(y), z=float(z), w=float(w)),
+            ),
+            covariance=[float(v) for v in cov.ravel()],
+        ),
+    )
+
+
+def angular_velocity_message(
+    pose: RelativePose, header: Header, frame: str, dt_s: float
+) -> TwistWithCovarianceStamped | None:
+    """One camera's angular velocity (rad/s) between frames ``dt_s`` seconds apart, in its
+    optical frame, with covariance (rad/s)^2; None without a covariance or a positive dt.
+
+    angular = rotvec(R_ba) / dt, R_ba = R^T the rotation of the later frame in the earlier one
+    (the axis is the same in both frames); linear = 0 with variance
+    :data:`UNKNOWN_VELOCITY_VARIANCE` (not measured).
+    """
+    if pose.covariance is None or not dt_s > 0:
+        return None
+    w = Rotation.from_matrix(pose.R.T).as_rotvec() / dt_s
+    cov = np.zeros((6, 6))
+    cov[:3, :3] = np.eye(3) * UNKNOWN_VELOCITY_VARIANCE
+    cov[3:, 3:] = pose.covariance.rotation_in_a() / dt_s**2
+    return TwistWithCovarianceStamped(
+        header=_stamped(header, frame),
+        twist=TwistWithCovariance(
+            twist=Twist(angular=Vector3(x=float(w[0]), y=float(w[1]), z=float(w[2]))),
+            covariance=[float(v) for v in ((cov + cov.T) / 2).ravel()],
+        ),
+    )
+
+
+def translation_direction_message(pose: RelativePose, header: Header, frame: str) -> Vector3Stamped:
+    """The unit direction (no unit: the length is unknown) of the later camera centre seen
+    from the earlier one, in the camera's optical frame: ``-R^T t``."""
+    d = -pose.R.T @ pose.t
+    d = d / np.linalg.norm(d)
+    return Vector3Stamped(
+        header=_stamped(header, frame),
+        vector=Vector3(x=float(d[0]), y=float(d[1]), z=float(d[2])),
     )
 
 

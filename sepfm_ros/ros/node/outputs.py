@@ -1,10 +1,12 @@
 """The node's publishers and what it publishes for a pair (the messages of
-:mod:`sepfm_ros.ros.session.answer`): ``~/estimate``, ``~/matches``, ``~/relative_transform``,
-``~/calibration_check``, ``~/debug_image`` with its image_transport ``compressed`` companion
-``~/debug_image/compressed`` (JPEG, format ``bgr8; jpeg compressed bgr8`` as image_transport's
-compressed publisher writes it), and the ``/diagnostics`` report. All reliable, keep-last 10 (a
-consumer subscribed before the pair arrives gets every answer). The debug image is drawn, and
-encoded, only for subscribers of either topic."""
+:mod:`sepfm_ros.ros.session.answer`): ``~/estimate``, ``~/matches``, the pose outputs
+(``~/relative_transform`` and ``~/relative_pose`` of a stereo rig, ``~/angular_velocity`` and
+``~/translation_direction`` of a moving camera), ``~/calibration_check``, ``~/debug_image`` with
+its image_transport ``compressed`` companion ``~/debug_image/compressed`` (JPEG, format
+``bgr8; jpeg compressed bgr8`` as image_transport's compressed publisher writes it), and the
+``/diagnostics`` report. All reliable, keep-last 10 (a consumer subscribed before the pair
+arrives gets every answer). The debug image is drawn, and encoded, only for subscribers of
+either topic."""
 
 from __future__ import annotations
 
@@ -13,7 +15,12 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import (
+    PoseWithCovarianceStamped,
+    TransformStamped,
+    TwistWithCovarianceStamped,
+    Vector3Stamped,
+)
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
@@ -42,6 +49,15 @@ class NodeOutputs:
         )
         self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
         self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
+        self.relative_pose = node.create_publisher(
+            PoseWithCovarianceStamped, "~/relative_pose", reliable
+        )
+        self.angular_velocity = node.create_publisher(
+            TwistWithCovarianceStamped, "~/angular_velocity", reliable
+        )
+        self.translation_direction = node.create_publisher(
+            Vector3Stamped, "~/translation_direction", reliable
+        )
         self.calibration = node.create_publisher(DiagnosticArray, "~/calibration_check", reliable)
 
     def answer(
@@ -55,8 +71,14 @@ class NodeOutputs:
         stage, returned); the debug image last, drawn only for a subscriber (``images``: the
         decoded pair; none for a failure record)."""
         t0 = time.perf_counter()
-        if answer.transform is not None:
-            self.pose.publish(answer.transform)
+        for publisher, msg in (
+            (self.pose, answer.transform),
+            (self.relative_pose, answer.relative_pose),
+            (self.angular_velocity, answer.angular_velocity),
+            (self.translation_direction, answer.translation_direction),
+        ):
+            if msg is not None:
+                publisher.publish(msg)
         calibration_check = answer.calibration_check()
         if calibration_check is not None:
             self.calibration.publish(calibration_check)

@@ -38,8 +38,11 @@ from sepfm_ros.ros.bags.types import (
     GROUND_TRUTH_TOPIC,
     IMAGE,
     MATCH_ARRAY,
+    POSE_WITH_COVARIANCE_STAMPED,
     TRANSFORM_STAMPED,
+    TWIST_WITH_COVARIANCE_STAMPED,
     TWO_VIEW_ESTIMATE,
+    VECTOR3_STAMPED,
     format_stamp,
 )
 from sepfm_ros.ros.bags.writer import BagWriter, check_output_path
@@ -141,7 +144,8 @@ def _output_topics(
     writer.add_topic(topics["matches"], MATCH_ARRAY, (OUTPUT_QOS,))
     if stream.infos is not None:
         topics = {**topics, **calibrated_topics(namespace)}
-        writer.add_topic(topics["relative_transform"], TRANSFORM_STAMPED, (OUTPUT_QOS,))
+        for kind, msgtype in _pose_types(stream.spec.mode == "stereo"):
+            writer.add_topic(topics[kind], msgtype, (OUTPUT_QOS,))
         writer.add_topic(topics["calibration_check"], DIAGNOSTIC_ARRAY, (OUTPUT_QOS,))
     if GROUND_TRUTH_TOPIC in reader.topics:
         reader.require(GROUND_TRUTH_TOPIC, (IMAGE,))
@@ -150,6 +154,19 @@ def _output_topics(
             writer.write(GROUND_TRUTH_TOPIC, raw.log_time_ns, raw.data)
         writer.flush()
     return topics
+
+
+def _pose_types(stereo: bool) -> tuple[tuple[str, str], ...]:
+    """(kind, message type) of the pose outputs of a stereo rig or of one moving camera."""
+    if stereo:
+        return (
+            ("relative_transform", TRANSFORM_STAMPED),
+            ("relative_pose", POSE_WITH_COVARIANCE_STAMPED),
+        )
+    return (
+        ("angular_velocity", TWIST_WITH_COVARIANCE_STAMPED),
+        ("translation_direction", VECTOR3_STAMPED),
+    )
 
 
 def run_process(
@@ -211,7 +228,7 @@ def process_pair(
     """The node's messages for one pair as (topic, CDR bytes), in the order the node publishes
     them (:meth:`BagStream.answer`: the same answer as the node's, a failure record for a pair
     that cannot be decoded or whose frame size changed); with camera_info, the relative
-    transform and calibration check too."""
+    pose outputs and calibration check too."""
     answer = stream.answer(job)
     if answer.result is None:
         stamp = format_stamp(stamp_ns(job.header.stamp))
@@ -222,8 +239,15 @@ def process_pair(
     if update is not None and update.error is not None:
         print(f"\ncamera_info unusable: {update.reason}", file=sys.stderr)
     out = []
-    if answer.transform is not None:
-        out.append((topics["relative_transform"], serialize_message(answer.transform)))
+    poses = {
+        "relative_transform": answer.transform,
+        "relative_pose": answer.relative_pose,
+        "angular_velocity": answer.angular_velocity,
+        "translation_direction": answer.translation_direction,
+    }
+    for kind, msg in poses.items():
+        if msg is not None:
+            out.append((topics[kind], serialize_message(msg)))
     calibration_check = answer.calibration_check()
     if calibration_check is not None:
         out.append((topics["calibration_check"], serialize_message(calibration_check)))

@@ -10,10 +10,14 @@ same answer for the same pair; nothing else composes outputs. A pair's answer
   ``decode`` kinds or ``size_change``, or ``STATUS_INTERNAL_ERROR``) with zero counts; matches
   the estimator refused are ``STATUS_BAD_INPUT`` of kind ``estimator_input``, with their counts;
 - ``sepfm_msgs/MatchArray`` (``~/matches``): every match (none in a failure record);
-- with camera_info: the ``geometry_msgs/TransformStamped`` pose (``~/relative_transform``) when
-  usable, and the calibration check's ``diagnostic_msgs/DiagnosticStatus`` of a calibrated
-  stereo rig, or the ERROR status of unusable camera_info, which ``~/calibration_check``
-  carries in a ``diagnostic_msgs/DiagnosticArray`` stamped with the pair's header
+- with camera_info, when the pose is usable: for a stereo rig the ``geometry_msgs/TransformStamped``
+  (``~/relative_transform``) and ``geometry_msgs/PoseWithCovarianceStamped`` (``~/relative_pose``)
+  of camera b in camera a's optical frame; for one moving camera the angular velocity
+  (``geometry_msgs/TwistWithCovarianceStamped``, ``~/angular_velocity``) and the unit translation
+  direction (``geometry_msgs/Vector3Stamped``, ``~/translation_direction``);
+  and the calibration check's ``diagnostic_msgs/DiagnosticStatus`` of a calibrated stereo rig,
+  or the ERROR status of unusable camera_info, which ``~/calibration_check`` carries in a
+  ``diagnostic_msgs/DiagnosticArray`` stamped with the pair's header
   (:meth:`PairAnswer.calibration_check`).
 
 Before pairing, :func:`precheck` skips an input message whose fields are unusable (the node in
@@ -40,7 +44,14 @@ from dataclasses import dataclass
 import numpy as np
 from builtin_interfaces.msg import Time
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from geometry_msgs.msg import Quaternion, Transform, TransformStamped
+from geometry_msgs.msg import (
+    PoseWithCovarianceStamped,
+    Quaternion,
+    Transform,
+    TransformStamped,
+    TwistWithCovarianceStamped,
+    Vector3Stamped,
+)
 from std_msgs.msg import Header
 
 from sepfm_msgs.msg import Match, MatchArray, StageTiming, TwoViewEstimate
@@ -130,7 +141,10 @@ class PairAnswer:
     Attributes:
         estimate: the TwoViewEstimate (always).
         matches: the MatchArray (always; empty for a failure record).
-        transform: the relative pose, when calibrated and usable.
+        transform: the relative pose of a stereo rig, when calibrated and usable.
+        relative_pose: the same with its covariance (when the inliers give one).
+        angular_velocity, translation_direction: a moving camera's rotation rate with its
+            covariance, and its unit translation direction.
         calibration: the calibration check, or the ERROR status of unusable camera_info.
         result: the pipeline's result (None for a failure record).
         cameras_update: what the camera_info gave this pair (None without calibration input).
@@ -142,6 +156,9 @@ class PairAnswer:
     matches: MatchArray
     transform: TransformStamped | None = None
     calibration: DiagnosticStatus | None = None
+    relative_pose: PoseWithCovarianceStamped | None = None
+    angular_velocity: TwistWithCovarianceStamped | None = None
+    translation_direction: Vector3Stamped | None = None
     result: PipelineResult | None = None
     cameras_update: CamerasUpdate | None = None
     calibrated: CalibratedOutputs | None = None
@@ -222,8 +239,12 @@ def answer_matched(
         t0 = time.perf_counter()
         stream = calibration.stream
         frames = stream.frames(headers.a.frame_id, headers.b.frame_id)
-        messages = stream.messages(result, settings.threshold_px, headers.header, frames)
+        dt_s = _seconds(headers.b) - _seconds(headers.a)
+        messages = stream.messages(result, settings.threshold_px, headers.header, frames, dt_s)
         answer.transform = messages.transform
+        answer.relative_pose = messages.relative_pose
+        answer.angular_velocity = messages.angular_velocity
+        answer.translation_direction = messages.translation_direction
         answer.calibrated = messages.outputs
         if messages.status is not None:
             answer.calibration = messages.status
@@ -269,6 +290,10 @@ def add_timings(msg: TwoViewEstimate, timings_ms: Mapping[str, float]) -> None:
 
 def _stamp(header: Header) -> Time:
     return Time(sec=int(header.stamp.sec), nanosec=int(header.stamp.nanosec))
+
+
+def _seconds(header: Header) -> float:
+    return int(header.stamp.sec) + int(header.stamp.nanosec) * 1e-9
 
 
 def _identity() -> Transform:

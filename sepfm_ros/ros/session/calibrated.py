@@ -4,7 +4,10 @@ with a stream's calibration (:class:`~sepfm_ros.pipeline.calibration.StreamCalib
 Per pair: :meth:`CalibratedStream.cameras` turns the latest ``CameraInfo`` of each camera into the
 camera models the pipeline undistorts with (None without usable ones, with an ERROR calibration
 status saying why); :meth:`CalibratedStream.messages` turns the pipeline's result into the
-pose and check (for ``~/estimate``), the ``~/relative_transform`` and the ``~/calibration_check``.
+pose and check (for ``~/estimate``), the ``~/calibration_check`` and the pose messages: for a
+stereo rig ``~/relative_transform`` and ``~/relative_pose`` (camera b in camera a's optical
+frame); for one moving camera ``~/angular_velocity`` and ``~/translation_direction`` (no
+transform: its parent would be its child).
 """
 
 from __future__ import annotations
@@ -14,7 +17,12 @@ from dataclasses import dataclass
 from typing import Any
 
 from diagnostic_msgs.msg import DiagnosticStatus
-from geometry_msgs.msg import TransformStamped
+from geometry_msgs.msg import (
+    PoseWithCovarianceStamped,
+    TransformStamped,
+    TwistWithCovarianceStamped,
+    Vector3Stamped,
+)
 from std_msgs.msg import Header
 
 from sepfm_ros.geometry.calibrated.calibration_check import CalibrationMonitor, MonitorConfig
@@ -22,10 +30,13 @@ from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
 from sepfm_ros.pipeline.calibration import CalibratedOutputs, StreamCalibration
 from sepfm_ros.pipeline.pipeline import PipelineResult
 from sepfm_ros.ros.msgs.calibration import (
+    angular_velocity_message,
     calibration_error_status,
     calibration_status,
     camera_model_from_info,
+    relative_pose_message,
     relative_transform,
+    translation_direction_message,
 )
 
 
@@ -53,6 +64,9 @@ class CalibratedMessages:
     outputs: CalibratedOutputs | None = None
     transform: TransformStamped | None = None
     status: DiagnosticStatus | None = None
+    relative_pose: PoseWithCovarianceStamped | None = None
+    angular_velocity: TwistWithCovarianceStamped | None = None
+    translation_direction: Vector3Stamped | None = None
 
 
 class CalibratedStream:
@@ -111,14 +125,25 @@ class CalibratedStream:
         return ids[0] or default_a, ids[1] or default_b
 
     def messages(
-        self, result: PipelineResult, threshold_px: float, header: Header, frames: tuple[str, str]
+        self,
+        result: PipelineResult,
+        threshold_px: float,
+        header: Header,
+        frames: tuple[str, str],
+        dt_s: float = 0.0,
     ) -> CalibratedMessages:
-        """Pose, transform and calibration status of a result estimated with the cameras of
-        :meth:`cameras` (stamped with the pair's ``header``)."""
+        """Pose messages and calibration status of a result estimated with the cameras of
+        :meth:`cameras` (stamped with the pair's ``header``; ``dt_s``: seconds from image a's
+        stamp to image b's, for a moving camera's angular velocity)."""
         outputs = self.calibration.outputs(result, threshold_px)
         out = CalibratedMessages(outputs)
-        if outputs.pose is not None and outputs.pose.ok:
-            out.transform = relative_transform(outputs.pose, header, *frames)
+        pose = outputs.pose
+        if pose is not None and pose.ok and self.calibration.stereo:
+            out.transform = relative_transform(pose, header, *frames)
+            out.relative_pose = relative_pose_message(pose, header, frames[0])
+        elif pose is not None and pose.ok:
+            out.angular_velocity = angular_velocity_message(pose, header, frames[0], dt_s)
+            out.translation_direction = translation_direction_message(pose, header, frames[0])
         if outputs.status is not None:
             out.status = calibration_status(outputs.status, self.node_fqn, self.hardware_id)
         return out

@@ -173,8 +173,9 @@ PARAMS: dict[str, ParamSpec] = {
     "use_camera_info": ParamSpec(
         True,
         "use camera_info (beside each image topic) when published: undistort the matched points"
-        " (F in undistorted pixels of K), publish ~/relative_transform and, for a calibrated"
-        " stereo rig, the calibration check",
+        " (F in undistorted pixels of K), publish the pose (stereo: ~/relative_transform and"
+        " ~/relative_pose; motion: ~/angular_velocity and ~/translation_direction) and, for a"
+        " calibrated stereo rig, the calibration check",
         read_only=True,
     ),
     "images": ParamSpec(

@@ -57,19 +57,29 @@ class CameraInfoInputs:
         self._latest: list[Any] = [None] * len(image_bases)
         self.received = 0
         self.topics = [node_camera_info_topic(node, base) for base in image_bases]
-        self._subs = [
-            InputSubscription(
-                node,
-                topic,
-                CameraInfo,
-                self._keeper(k),
-                reliability,
-                on_lost=on_lost,
-                on_incompatible=on_incompatible,
-                on_created=on_created,
-            )
-            for k, topic in enumerate(self.topics)
-        ]
+        self._make = lambda k, topic: InputSubscription(
+            node,
+            topic,
+            CameraInfo,
+            self._keeper(k),
+            reliability,
+            on_lost=on_lost,
+            on_incompatible=on_incompatible,
+            on_created=on_created,
+        )
+        self._subs: list[InputSubscription] = []
+        self.resume()
+
+    def resume(self) -> None:
+        """Subscribe (again, after :meth:`pause`; the latest messages are kept)."""
+        if not self._subs:
+            self._subs = [self._make(k, topic) for k, topic in enumerate(self.topics)]
+
+    def pause(self) -> None:
+        """Destroy the subscriptions (the node has no demand, or is deactivated)."""
+        for sub in self._subs:
+            sub.destroy()
+        self._subs = []
 
     def _keeper(self, k: int) -> Callable[[Any], None]:
         def keep(msg: Any) -> None:

@@ -1,7 +1,13 @@
 """The node's publishers and what it publishes for a pair (the messages of
 :mod:`sepfm_ros.ros.session.answer`): ``~/estimate``, ``~/matches``, ``~/relative_transform``,
 ``~/calibration_check``, ``~/debug_image``, and the ``/diagnostics`` report. All reliable,
-keep-last 10 (a consumer subscribed before the pair arrives gets every answer)."""
+keep-last 10 (a consumer subscribed before the pair arrives gets every answer).
+
+The answer publishers are lifecycle publishers: they publish only while the node is active.
+:attr:`NodeOutputs.demand_publishers` lists the outputs whose subscribers are demand (the node
+holds its image subscriptions only while one of them has a subscriber, unless ``always_on``):
+a publisher added to that list counts. ``/diagnostics`` and ``~/calibration_check`` never
+count."""
 
 from __future__ import annotations
 
@@ -9,9 +15,10 @@ import time
 from typing import Any
 
 import numpy as np
-from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticStatus
 from geometry_msgs.msg import TransformStamped
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import Image
 from std_msgs.msg import Header
@@ -22,18 +29,39 @@ from sepfm_ros.ros.msgs.diagnostics import diagnostic_array
 from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
 from sepfm_ros.ros.session.answer import PairAnswer, add_timings
 
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+
 
 class NodeOutputs:
-    """Publishers of the node ``node`` (created here)."""
+    """Publishers of the lifecycle node ``node`` (created here; ``diagnostics``: the node's
+    ``/diagnostics`` publisher, which it holds in every state)."""
 
-    def __init__(self, node: Node) -> None:
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.estimate = node.create_publisher(TwoViewEstimate, "~/estimate", reliable)
-        self.matches = node.create_publisher(MatchArray, "~/matches", reliable)
-        self.debug = node.create_publisher(Image, "~/debug_image", reliable)
-        self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
-        self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
-        self.calibration = node.create_publisher(DiagnosticStatus, "~/calibration_check", reliable)
+    def __init__(self, node: LifecycleNode, diagnostics: Publisher) -> None:
+        make = node.create_lifecycle_publisher
+        self.estimate = make(TwoViewEstimate, "~/estimate", RELIABLE)
+        self.matches = make(MatchArray, "~/matches", RELIABLE)
+        self.debug = make(Image, "~/debug_image", RELIABLE)
+        self.diagnostics = diagnostics
+        self.pose = make(TransformStamped, "~/relative_transform", RELIABLE)
+        self.calibration = make(DiagnosticStatus, "~/calibration_check", RELIABLE)
+        #: the outputs whose subscribers make the node work (see the module docstring)
+        self.demand_publishers: list[Publisher] = [
+            self.estimate,
+            self.matches,
+            self.pose,
+            self.debug,
+        ]
+        self._node = node
+        self._own = [self.estimate, self.matches, self.debug, self.pose, self.calibration]
+
+    def demand(self) -> int:
+        """Subscribers matched by the demand publishers (summed)."""
+        return sum(p.get_subscription_count() for p in self.demand_publishers)
+
+    def destroy(self) -> None:
+        """Destroy the answer publishers (cleanup; ``/diagnostics`` stays)."""
+        for pub in self._own:
+            self._node.destroy_lifecycle_publisher(pub)
 
     def answer(
         self,

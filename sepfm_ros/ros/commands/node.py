@@ -71,6 +71,6 @@ def main(argv: list[str]) -> int:
 
     code = run_node("sepfm_ros node", "sepfm", argv, make_node, SepfmNode.shutdown)
     if warm.running:  # stopped while the kernels compile: that thread cannot be joined
-        print("sepfm_ros node: stopped while preparing the estimator", flush=True)
+        print("sepfm_ros node: interrupted while preparing the estimator", flush=True)
         os._exit(code)
     return code

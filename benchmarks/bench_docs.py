@@ -38,6 +38,7 @@ SECTIONS = {
     "bench_engines": "python benchmarks/bench_engines.py --write-docs",
     "bench_audit": "python benchmarks/bench_audit.py --write-docs",
     "bench_rigs": "python benchmarks/bench_rigs.py --write-docs",
+    "bench_graph": "python benchmarks/bench_graph.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

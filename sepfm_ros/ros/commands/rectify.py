@@ -50,6 +50,10 @@ def _usage() -> str:
             "Subscribes to left/image_raw + right/image_raw and sepfm/estimate + sepfm/matches;",
             "publishes left/image_rect, right/image_rect and /diagnostics.",
             "",
+            "A lifecycle node (lifecycle_msgs services ~/change_state, ~/get_state, ...): it",
+            "configures and activates itself unless autostart:=false; configure creates its",
+            "publishers, activate its subscriptions; deactivated it publishes nothing.",
+            "",
             "parameters (read-only):",
             parameters_help(PARAMS),
         ]

@@ -58,6 +58,12 @@ class Lifecycle:
             assert time.monotonic() < deadline, f"state {state_id} never reached"
             time.sleep(0.2)
 
+    def refused(self, transition_id: int) -> bool:
+        """Whether the node refuses ``transition_id`` (not one of its state's) and stays."""
+        before = self.state()
+        request = ChangeState.Request(transition=Transition(id=transition_id))
+        return not _call(self.ros, self.change, request).success and self.state() == before
+
     def transition(self, transition_id: int, expect: int) -> None:
         request = ChangeState.Request(transition=Transition(id=transition_id))
         assert _call(self.ros, self.change, request).success, f"transition {transition_id}"
@@ -138,6 +144,8 @@ def test_sepfm_node_every_transition_and_silent_when_deactivated(ros, tmp_path):
     try:
         assert manager.state() == State.PRIMARY_STATE_UNCONFIGURED  # autostart:=false waits
         assert ros.node.count_publishers(f"/{name}/estimate") == 0
+        # a transition the state does not have is refused; the node keeps serving
+        assert manager.refused(Transition.TRANSITION_ACTIVATE)
         manager.transition(Transition.TRANSITION_CONFIGURE, State.PRIMARY_STATE_INACTIVE)
         _wait(lambda: ros.node.count_publishers(f"/{name}/estimate") == 1, "no ~/estimate")
         manager.transition(Transition.TRANSITION_ACTIVATE, State.PRIMARY_STATE_ACTIVE)

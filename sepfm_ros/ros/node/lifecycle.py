@@ -19,6 +19,7 @@ from collections.abc import Callable
 from typing import Any
 
 from lifecycle_msgs.msg import State
+from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState
 from rclpy.lifecycle import TransitionCallbackReturn as Ret
 
@@ -159,6 +160,23 @@ class ManagedNode(LifecycleNode):
         super().__init__(node_name, **kwargs)
         self.warm = warm
         self.configured = False
+        # rclpy raises from the change_state service on a transition the current state does
+        # not have (activate while unconfigured), which would end the executor's spin: refuse it
+        service = self._service_change_state
+        change = service.callback
+
+        def refuse_invalid(request: Any, response: Any) -> Any:
+            try:
+                return change(request, response)
+            except RCLError as err:
+                self.get_logger().warning(
+                    f"lifecycle transition {request.transition.id} "
+                    f"{request.transition.label!r} refused in state {state_name(self)}: {err}"
+                )
+                response.success = False
+                return response
+
+        service.callback = refuse_invalid
 
     @property
     def kernels_ready(self) -> bool:

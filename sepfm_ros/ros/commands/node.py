@@ -56,11 +56,13 @@ def main(argv: list[str]) -> int:
     malloc_fixed = configure_malloc()
     dds = configure_dds()
     limit_thread_pools(1)
-    # compile (fresh install) or load the estimator's kernels on a thread of their own: the node
-    # is in the graph, answering its lifecycle services, meanwhile; configure waits for them
-    warm = KernelWarmUp().start()
+    warm = KernelWarmUp()
 
     def make_node() -> SepfmNode:
+        # after rclpy.init (its SIGINT/SIGTERM handlers stop a compile too): compile (fresh
+        # install) or load the estimator's kernels on a thread of their own; the node is in the
+        # graph, answering its lifecycle services, meanwhile, and configure waits for them
+        warm.start()
         node = SepfmNode(dds=dds, warm=warm)
         node.get_logger().info(
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "

@@ -128,6 +128,7 @@ class SepfmNode(ManagedNode):
         self.add_post_set_parameters_callback(self._apply_parameters)
         self._diag_timer = self.create_timer(values["diagnostics_period_s"], self._report_health)
         self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
+        self._stall_timer.cancel()  # runs while the inputs are held (no wake-ups while idle)
         if values["autostart"]:
             start_when_ready(self)
 
@@ -183,6 +184,7 @@ class SepfmNode(ManagedNode):
             self._pairing = self._session.pairing()
         self._scheduler.reset_input()
         self._health.restart_input()
+        self._stall_timer.reset()
         values = self._param_values()
         self._subs = self._input_subscriptions(self._inputs, values["input_reliability"])
         if self._camera_info is None:
@@ -197,6 +199,7 @@ class SepfmNode(ManagedNode):
         for sub in self._subs:
             sub.destroy()
         self._subs = []
+        self._stall_timer.cancel()
         if self._camera_info is not None:
             self._camera_info.pause()
         self.get_logger().info("idle: no subscribers to the outputs; input subscriptions released")
@@ -549,10 +552,7 @@ class SepfmNode(ManagedNode):
 
     @guarded
     def _check_level_change(self) -> None:
-        """Report at once when one camera stalls or comes back (between periodic reports; off
-        while idle)."""
-        if not self._demand.on:
-            return
+        """Report at once when one camera stalls or comes back (between periodic reports)."""
         stall = self._health.stall()
         if (stall is None) != (self._reported_stall is None):
             self._report_health()

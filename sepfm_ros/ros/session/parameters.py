@@ -186,7 +186,9 @@ PARAMS: dict[str, ParamSpec] = {
 }
 
 # parameters whose default follows other parameters (config/sepfm.yaml leaves them out): the rule
-COMPUTED_DEFAULTS = {"always_on": "true in stereo mode with use_camera_info (calibrated stereo)"}
+COMPUTED_DEFAULTS = {
+    "always_on": "(true in stereo mode with use_camera_info: calibrated stereo; else false)"
+}
 
 
 def always_on_default(values: Mapping[str, Any]) -> bool:

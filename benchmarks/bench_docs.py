@@ -40,6 +40,7 @@ SECTIONS = {
     "bench_rigs": "python benchmarks/bench_rigs.py --write-docs",
     "bench_netns": "python benchmarks/bench_netns.py --write-docs",
     "bench_pose_covariance": "python benchmarks/bench_pose_covariance.py --write-docs",
+    "bench_graph": "python benchmarks/bench_graph.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

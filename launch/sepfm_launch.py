@@ -10,6 +10,9 @@ Arguments: mode (stereo|motion), image_transport (raw|compressed), params_file, 
 use_sim_time, and the input topics left, right (stereo) and image (motion). The topics are base
 image topics: with image_transport:=compressed the node adds /compressed after the remap, as
 image_transport does.
+
+The node is a lifecycle node (launch_ros ``LifecycleNode``): it configures and activates itself
+(``autostart``, default true); with ``autostart:=false`` a lifecycle manager drives it.
 """
 
 import os
@@ -17,7 +20,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode
 from launch_ros.parameter_descriptions import ParameterValue
 
 from launch import LaunchDescription
@@ -34,8 +37,9 @@ def generate_launch_description() -> LaunchDescription:
         "left": ("left/image_raw", "stereo: left image topic"),
         "right": ("right/image_raw", "stereo: right image topic"),
         "image": ("image_raw", "motion: image topic"),
+        "autostart": ("true", "configure and activate at start (false: a lifecycle manager does)"),
     }
-    node = Node(
+    node = LifecycleNode(
         package="sepfm_ros",
         executable="node",
         name="sepfm",
@@ -49,6 +53,7 @@ def generate_launch_description() -> LaunchDescription:
                 "use_sim_time": ParameterValue(
                     LaunchConfiguration("use_sim_time"), value_type=bool
                 ),
+                "autostart": ParameterValue(LaunchConfiguration("autostart"), value_type=bool),
             },
         ],
         remappings=[

@@ -7,8 +7,9 @@ Each rig NAME gets a node ``/NAME/sepfm`` (the config/sepfm.yaml parameters, ste
 inputs are the rig's ``/NAME/left/image_raw`` and ``/NAME/right/image_raw`` with their
 ``camera_info`` beside them, and whose outputs and calibration check are under ``/NAME/sepfm/``.
 Arguments: rigs (comma-separated namespaces), image_transport (raw|compressed), params_file,
-use_sim_time. How many rigs a host answers completely is measured in docs/benchmarks.md
-(``benchmarks/bench_rigs.py``).
+use_sim_time, autostart (the nodes are lifecycle nodes, launch_ros ``LifecycleNode``s, that
+configure and activate themselves unless autostart:=false). How many rigs a host answers
+completely is measured in docs/benchmarks.md (``benchmarks/bench_rigs.py``).
 """
 
 import os
@@ -16,7 +17,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch.actions import DeclareLaunchArgument, OpaqueFunction
 from launch.substitutions import LaunchConfiguration
-from launch_ros.actions import Node
+from launch_ros.actions import LifecycleNode
 
 from launch import LaunchDescription
 
@@ -32,11 +33,12 @@ def rig_names(text: str) -> list[str]:
     return names
 
 
-def _nodes(context) -> list[Node]:
+def _nodes(context) -> list[LifecycleNode]:
     names = rig_names(LaunchConfiguration("rigs").perform(context))
     sim_time = LaunchConfiguration("use_sim_time").perform(context).lower() == "true"
+    autostart = LaunchConfiguration("autostart").perform(context).lower() == "true"
     return [
-        Node(
+        LifecycleNode(
             package="sepfm_ros",
             executable="node",
             name="sepfm",
@@ -48,6 +50,7 @@ def _nodes(context) -> list[Node]:
                     "mode": "stereo",
                     "image_transport": LaunchConfiguration("image_transport"),
                     "use_sim_time": sim_time,
+                    "autostart": autostart,
                 },
             ],
         )
@@ -62,6 +65,7 @@ def generate_launch_description() -> LaunchDescription:
         "image_transport": ("raw", "raw or compressed (the nodes subscribe to <topic>/compressed)"),
         "params_file": (default_params, "node parameters (YAML), shared by every rig"),
         "use_sim_time": ("false", "true: stamps and /diagnostics on /clock time (bag replay)"),
+        "autostart": ("true", "configure and activate at start (false: a lifecycle manager does)"),
     }
     declared = [
         DeclareLaunchArgument(k, default_value=v, description=d) for k, (v, d) in args.items()

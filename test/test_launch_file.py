@@ -10,7 +10,16 @@ import pytest
 from ground_truth import REPO_ROOT
 
 LAUNCH = REPO_ROOT / "launch" / "sepfm_launch.py"
-ARGUMENTS = {"mode", "image_transport", "params_file", "namespace", "use_sim_time", "left", "right"}
+ARGUMENTS = {
+    "mode",
+    "image_transport",
+    "params_file",
+    "namespace",
+    "use_sim_time",
+    "left",
+    "right",
+    "autostart",
+}
 
 
 def _literal_dict_keys(tree: ast.AST) -> set[str]:
@@ -31,6 +40,21 @@ def test_launch_file_declares_namespace_sim_time_and_remaps_base_topics():
     # base image topics only: the node adds /compressed after resolving them
     assert remapped == {"left/image_raw", "right/image_raw", "image_raw"}
     assert "compressed" not in {r.split("/")[-1] for r in remapped}
+
+
+def test_the_node_is_a_lifecycle_node_with_autostart():
+    """launch_ros's LifecycleNode (its lifecycle services for a manager); autostart passed on."""
+    tree = ast.parse(LAUNCH.read_text())
+    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
+    names = {getattr(c.func, "id", "") for c in calls}
+    assert "LifecycleNode" in names and "Node" not in names
+    imports = {
+        (n.module, a.name) for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) for a in n.names
+    }
+    assert ("launch_ros.actions", "LifecycleNode") in imports
+    node = next(c for c in calls if getattr(c.func, "id", "") == "LifecycleNode")
+    kw = {k.arg: k.value for k in node.keywords}
+    assert "autostart" in ast.unparse(kw["parameters"])
 
 
 def test_launch_description_generates():

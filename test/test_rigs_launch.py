@@ -36,8 +36,13 @@ def test_each_rig_is_a_stereo_node_in_its_namespace():
     for node in ast.walk(tree):
         if isinstance(node, ast.Assign) and getattr(node.targets[0], "id", "") == "args":
             keys |= {k.value for k in node.value.keys}
-    assert keys == {"rigs", "image_transport", "params_file", "use_sim_time"}
+    assert keys == {"rigs", "image_transport", "params_file", "use_sim_time", "autostart"}
     calls = [
+        n
+        for n in ast.walk(tree)
+        if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "LifecycleNode"
+    ]
+    assert not [
         n for n in ast.walk(tree) if isinstance(n, ast.Call) and getattr(n.func, "id", "") == "Node"
     ]
     assert len(calls) == 1
@@ -45,7 +50,8 @@ def test_each_rig_is_a_stereo_node_in_its_namespace():
     assert getattr(kw["namespace"], "id", "") == "name"  # the rig's own namespace
     assert ast.literal_eval(kw["name"]) == "sepfm" and ast.literal_eval(kw["executable"]) == "node"
     assert "remappings" not in kw  # relative inputs resolve in the rig's namespace
-    assert '"mode": "stereo"' in ast.unparse(kw["parameters"]).replace("'", '"')
+    parameters = ast.unparse(kw["parameters"]).replace("'", '"')
+    assert '"mode": "stereo"' in parameters and '"autostart": autostart' in parameters
 
 
 def test_launch_description_generates():
@@ -55,4 +61,4 @@ def test_launch_description_generates():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     names = {getattr(e, "name", None) for e in module.generate_launch_description().entities}
-    assert {"rigs", "image_transport", "params_file", "use_sim_time"} <= names
+    assert {"rigs", "image_transport", "params_file", "use_sim_time", "autostart"} <= names

@@ -193,6 +193,14 @@ class Health:
             self.published += int(published)
             self.not_ok += int(not ok)
 
+    def restart_input(self) -> None:
+        """Forget when each input last arrived and when the last pair formed (the node
+        subscribed again after an idle spell: no stall is judged on the time it held none)."""
+        with self._lock:
+            self._last_input.clear()
+            self._both_since = None
+            self._last_pair = None
+
     def restart_pairing(self) -> None:
         """Forget when the last pair formed (the input restarted)."""
         with self._lock:

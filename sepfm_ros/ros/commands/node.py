@@ -1,8 +1,9 @@
 """``sepfm_ros node``: the process around :class:`~sepfm_ros.ros.node.sepfm.SepfmNode`.
 
 Process-wide settings first (malloc thresholds, the DDS settings, one thread per native pool),
-then the estimator's kernels (compiled once after an install, loaded from the cache afterwards),
-then the node on a single-threaded executor until SIGINT or SIGTERM.
+then the estimator's kernels (compiled once after an install, loaded from the cache afterwards) on
+a thread, while the lifecycle node is already in the graph on a single-threaded executor until
+SIGINT or SIGTERM (``autostart`` configures and activates it once the kernels are ready).
 """
 
 from __future__ import annotations
@@ -10,14 +11,10 @@ from __future__ import annotations
 import os
 
 from sepfm_ros.ros.node.dds import configure_dds
+from sepfm_ros.ros.node.lifecycle import KernelWarmUp
 from sepfm_ros.ros.node.memory import configure_malloc
 from sepfm_ros.ros.node.sepfm import SepfmNode
-from sepfm_ros.ros.node.spin import (
-    limit_thread_pools,
-    parse_command_line,
-    run_node,
-    warm_up_interruptibly,
-)
+from sepfm_ros.ros.node.spin import limit_thread_pools, parse_command_line, run_node
 from sepfm_ros.ros.session.parameters import parameters_help, renamed_help
 
 
@@ -37,6 +34,18 @@ def _usage() -> str:
         "TransportHints. camera_info (beside each image topic) is matched to each image by stamp",
         "(exact, else nearest within sync_slop_s); images without one, and frames missing from",
         "a camera's stamp sequence, are counted in /diagnostics.",
+        "",
+        "A lifecycle node (lifecycle_msgs services ~/change_state, ~/get_state, ...): it is in",
+        "the graph at once, reporting 'warming up' on /diagnostics while the estimator's kernels",
+        "compile or load; then it configures and activates itself (autostart:=false: it waits",
+        "for a lifecycle manager). Deactivated, it holds no input and publishes nothing.",
+        "",
+        "On demand: the node subscribes to its images (and camera_info) only while ~/estimate,",
+        "~/matches, the pose outputs or ~/debug_image have a subscriber (/diagnostics does not",
+        "count), within a second of the first one, and answers fresh pairs from then on; idle,",
+        "/diagnostics says OK 'idle: no subscribers' and the stall checks are off. always_on:=true",
+        "keeps it processing for monitoring; it defaults to true for calibrated stereo (mode",
+        "stereo with use_camera_info), where the calibration check is the point.",
         "",
         "parameters:",
         parameters_help(),
@@ -58,15 +67,14 @@ def main(argv: list[str]) -> int:
     malloc_fixed = configure_malloc()
     dds = configure_dds()
     limit_thread_pools(1)
-    # compile (fresh install) or load the estimator's kernels before the first frame arrives
-    warm_s = warm_up_interruptibly()
-    if warm_s is None:
-        print("sepfm_ros node: interrupted while preparing the estimator", flush=True)
-        os._exit(0)  # the compiling thread cannot be joined; nothing is open yet
+    warm = KernelWarmUp()
 
     def make_node() -> SepfmNode:
-        node = SepfmNode(dds=dds)
-        node.get_logger().info(f"estimator kernels ready in {warm_s:.1f} s")
+        # after rclpy.init (its SIGINT/SIGTERM handlers stop a compile too): compile (fresh
+        # install) or load the estimator's kernels on a thread of their own; the node is in the
+        # graph, answering its lifecycle services, meanwhile, and configure waits for them
+        warm.start()
+        node = SepfmNode(dds=dds, warm=warm)
         node.get_logger().info(
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
             + ("DDS subscriptions with DYNAMIC history" if dds.profiles else "DDS config left")
@@ -74,4 +82,8 @@ def main(argv: list[str]) -> int:
         )
         return node
 
-    return run_node("sepfm_ros node", "sepfm", argv, make_node, SepfmNode.shutdown)
+    code = run_node("sepfm_ros node", "sepfm", argv, make_node, SepfmNode.shutdown)
+    if warm.running:  # stopped while the kernels compile: that thread cannot be joined
+        print("sepfm_ros node: interrupted while preparing the estimator", flush=True)
+        os._exit(code)
+    return code

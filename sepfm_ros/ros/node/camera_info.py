@@ -23,6 +23,7 @@ from typing import Any
 from rclpy.node import Node
 
 from sepfm_ros.ros.msgs.headers import camera_info_topic, stamp_ns
+from sepfm_ros.ros.node.keep_serving import ThrottledLog
 from sepfm_ros.ros.node.subscriptions import InputSubscription
 
 CAMERA_INFO = "camera_info"
@@ -78,19 +79,29 @@ class CameraInfoInputs:
         self.received = 0
         self.unmatched = [0] * len(image_bases)  #: images answered without their camera_info
         self.topics = [node_camera_info_topic(node, base) for base in image_bases]
-        self._subs = [
-            InputSubscription(
-                node,
-                topic,
-                CameraInfo,
-                self._keeper(k),
-                reliability,
-                on_lost=on_lost,
-                on_incompatible=on_incompatible,
-                on_created=on_created,
-            )
-            for k, topic in enumerate(self.topics)
-        ]
+        self._make = lambda k, topic: InputSubscription(
+            node,
+            topic,
+            CameraInfo,
+            self._keeper(k),
+            reliability,
+            on_lost=on_lost,
+            on_incompatible=on_incompatible,
+            on_created=on_created,
+        )
+        self._subs: list[InputSubscription] = []
+        self.resume()
+
+    def resume(self) -> None:
+        """Subscribe (again, after :meth:`pause`; the latest messages are kept)."""
+        if not self._subs:
+            self._subs = [self._make(k, topic) for k, topic in enumerate(self.topics)]
+
+    def pause(self) -> None:
+        """Destroy the subscriptions (the node has no demand, or is deactivated)."""
+        for sub in self._subs:
+            sub.destroy()
+        self._subs = []
 
     def _keeper(self, k: int) -> Callable[[Any], None]:
         def keep(msg: Any) -> None:
@@ -125,6 +136,20 @@ class CameraInfoInputs:
                 infos.append(info)
             return infos, missing
 
+    def for_images(self, msgs: list[Any], slop_ns: int, log: ThrottledLog) -> list[Any] | None:
+        """:meth:`for_stamps` for the images ``msgs`` (one per camera), logging (throttled by
+        ``log``) each image answered without a camera_info of its stamp."""
+        stamps = [stamp_ns(m.header.stamp) for m in msgs]
+        infos, missing = self.for_stamps(stamps, slop_ns)
+        for k in missing:
+            log.log(
+                "camera_info_unmatched",
+                f"no camera_info on {self.topics[k]} stamped within sync_slop_s of the image "
+                f"stamped {stamps[k] / 1e9:.3f} s: answered with the latest one",
+                error=False,
+            )
+        return infos
+
     def diagnostic_values(self) -> dict[str, int]:
         """``camera_info_ready``: 1 once every camera's camera_info has arrived (a player can wait
         for it before the first images); ``images_without_camera_info``: images answered without
@@ -138,3 +163,14 @@ class CameraInfoInputs:
                 for topic, count in zip(self.topics, self.unmatched, strict=True):
                     values[f"images_without_camera_info_{topic}"] = count
         return values
+
+
+def calibration_in_use_text(calibration: Any) -> str:
+    """The log line for a calibration newly in use (``calibration``: the session's
+    :class:`~sepfm_ros.ros.session.calibrated.CalibratedStream` calibration)."""
+    return (
+        "camera_info in use: F in undistorted pixels of K"
+        + (", rectified images" if calibration.rectified else "")
+        + (f", no calibration check ({calibration.rig_problem})" if calibration.rig_problem else "")
+        + ("" if calibration.rig is None else ", stereo calibration check on")
+    )

@@ -6,7 +6,13 @@ its image_transport ``compressed`` companion ``~/debug_image/compressed`` (JPEG,
 ``bgr8; jpeg compressed bgr8`` as image_transport's compressed publisher writes it), and the
 ``/diagnostics`` report. All reliable, keep-last 10 (a consumer subscribed before the pair
 arrives gets every answer). The debug image is drawn, and encoded, only for subscribers of
-either topic."""
+either topic.
+
+The answer publishers are lifecycle publishers: they publish only while the node is active.
+:attr:`NodeOutputs.demand_publishers` lists the outputs whose subscribers are demand (the node
+holds its image subscriptions only while one of them has a subscriber, unless ``always_on``):
+a publisher added to that list counts. ``/diagnostics`` and ``~/calibration_check`` never
+count."""
 
 from __future__ import annotations
 
@@ -21,7 +27,8 @@ from geometry_msgs.msg import (
     TwistWithCovarianceStamped,
     Vector3Stamped,
 )
-from rclpy.node import Node
+from rclpy.lifecycle import LifecycleNode
+from rclpy.publisher import Publisher
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
@@ -34,31 +41,47 @@ from sepfm_ros.ros.session.answer import PairAnswer, add_timings
 
 #: CompressedImage.format of ~/debug_image/compressed (image_transport's compressed plugin)
 DEBUG_COMPRESSED_FORMAT = "bgr8; jpeg compressed bgr8"
+RELIABLE = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
 
 
 class NodeOutputs:
-    """Publishers of the node ``node`` (created here)."""
+    """Publishers of the lifecycle node ``node`` (created here; ``diagnostics``: the node's
+    ``/diagnostics`` publisher, which it holds in every state)."""
 
-    def __init__(self, node: Node) -> None:
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self.estimate = node.create_publisher(TwoViewEstimate, "~/estimate", reliable)
-        self.matches = node.create_publisher(MatchArray, "~/matches", reliable)
-        self.debug = node.create_publisher(Image, "~/debug_image", reliable)
-        self.debug_compressed = node.create_publisher(
-            CompressedImage, "~/debug_image/compressed", reliable
-        )
-        self.diagnostics = node.create_publisher(DiagnosticArray, "/diagnostics", reliable)
-        self.pose = node.create_publisher(TransformStamped, "~/relative_transform", reliable)
-        self.relative_pose = node.create_publisher(
-            PoseWithCovarianceStamped, "~/relative_pose", reliable
-        )
-        self.angular_velocity = node.create_publisher(
-            TwistWithCovarianceStamped, "~/angular_velocity", reliable
-        )
-        self.translation_direction = node.create_publisher(
-            Vector3Stamped, "~/translation_direction", reliable
-        )
-        self.calibration = node.create_publisher(DiagnosticArray, "~/calibration_check", reliable)
+    def __init__(self, node: LifecycleNode, diagnostics: Publisher) -> None:
+        make = node.create_lifecycle_publisher
+        self.estimate = make(TwoViewEstimate, "~/estimate", RELIABLE)
+        self.matches = make(MatchArray, "~/matches", RELIABLE)
+        self.debug = make(Image, "~/debug_image", RELIABLE)
+        self.debug_compressed = make(CompressedImage, "~/debug_image/compressed", RELIABLE)
+        self.diagnostics = diagnostics
+        self.pose = make(TransformStamped, "~/relative_transform", RELIABLE)
+        self.relative_pose = make(PoseWithCovarianceStamped, "~/relative_pose", RELIABLE)
+        self.angular_velocity = make(TwistWithCovarianceStamped, "~/angular_velocity", RELIABLE)
+        self.translation_direction = make(Vector3Stamped, "~/translation_direction", RELIABLE)
+        self.calibration = make(DiagnosticArray, "~/calibration_check", RELIABLE)
+        #: the outputs whose subscribers make the node work (see the module docstring)
+        self.demand_publishers: list[Publisher] = [
+            self.estimate,
+            self.matches,
+            self.pose,
+            self.relative_pose,
+            self.angular_velocity,
+            self.translation_direction,
+            self.debug,
+            self.debug_compressed,
+        ]
+        self._node = node
+        self._own = [*self.demand_publishers, self.calibration]
+
+    def demand(self) -> int:
+        """Subscribers matched by the demand publishers (summed)."""
+        return sum(p.get_subscription_count() for p in self.demand_publishers)
+
+    def destroy(self) -> None:
+        """Destroy the answer publishers (cleanup; ``/diagnostics`` stays)."""
+        for pub in self._own:
+            self._node.destroy_lifecycle_publisher(pub)
 
     def answer(
         self,

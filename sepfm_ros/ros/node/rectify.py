@@ -10,8 +10,6 @@ from typing import Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
-from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
@@ -41,6 +39,8 @@ from sepfm_ros.ros.msgs.image_conversion import (
 )
 from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
+from sepfm_ros.ros.node.lifecycle import ManagedNode, start_when_ready, state_name
+from sepfm_ros.ros.node.outputs import RELIABLE
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.session.parameters import (
     DIAGNOSTIC_PERIOD,
@@ -62,7 +62,13 @@ PENDING_ESTIMATES = 20
 
 _PARAMS: dict[str, ParamSpec] = {
     name: NODE_PARAMS[name]
-    for name in ("image_transport", "input_reliability", "sync_slop_s", "sync_queue_size")
+    for name in (
+        "image_transport",
+        "input_reliability",
+        "sync_slop_s",
+        "sync_queue_size",
+        "autostart",
+    )
 } | {
     "encoding": ParamSpec(
         "mono8", "encoding of the rectified images", choices=COLOR_SPACES, read_only=True
@@ -131,13 +137,15 @@ def rectification_from_estimate(
     return rect, float(np.median(vertical_disparity(rect.H_a, rect.H_b, pts_a, pts_b)))
 
 
-class RectifyNode(Node):
-    """The ``rectify`` node (see the module docstring)."""
+class RectifyNode(ManagedNode):
+    """The ``rectify`` node (see the module docstring), a lifecycle node
+    (:class:`~sepfm_ros.ros.node.lifecycle.ManagedNode`): configure creates the publishers,
+    activate the subscriptions; deactivated it holds no subscription and publishes nothing."""
 
     def __init__(
         self, node_name: str = NODE_NAME, dds: DdsSetup | None = None, **kwargs: Any
     ) -> None:
-        super().__init__(node_name, **kwargs)
+        super().__init__(node_name, None, **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
         # values given under an old name: warned, and used unless the new name is given too
         aliased, texts = renamed_values(getattr(self, "_parameter_overrides", {}), PARAMS)
@@ -163,12 +171,30 @@ class RectifyNode(Node):
         self._pairing: StereoPairing[Image] = StereoPairing(
             int(round(self._values["sync_slop_s"] * 1e9)), int(self._values["sync_queue_size"])
         )
-        reliable = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
-        self._pub = (
-            self.create_publisher(Image, "left/image_rect", reliable),
-            self.create_publisher(Image, "right/image_rect", reliable),
+        self._pub: tuple[Any, ...] = ()
+        self._subs: list[InputSubscription] = []
+        self._estimate_subs: list[Any] = []
+        self._diagnostics = self.create_lifecycle_publisher(
+            DiagnosticArray, "/diagnostics", RELIABLE
         )
-        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", reliable)
+        self.create_timer(float(self._values[DIAGNOSTIC_PERIOD]), self._report)
+        if self._values["autostart"]:
+            start_when_ready(self)
+
+    def configure_node(self, warm_s: float) -> None:
+        """The rectified image publishers."""
+        self._pub = (
+            self.create_lifecycle_publisher(Image, "left/image_rect", RELIABLE),
+            self.create_lifecycle_publisher(Image, "right/image_rect", RELIABLE),
+        )
+
+    def release_node(self) -> None:
+        for pub in self._pub:
+            self.destroy_lifecycle_publisher(pub)
+        self._pub = ()
+
+    def activate_inputs(self) -> None:
+        """Subscribe to the images and to the sepfm node's estimates and matches."""
         transport = self._values["image_transport"]
         msg_type = CompressedImage if transport == "compressed" else Image
         self._subs = [
@@ -185,15 +211,26 @@ class RectifyNode(Node):
             )
             for base, side in (("left/image_raw", LEFT), ("right/image_raw", RIGHT))
         ]
-        self.create_subscription(TwoViewEstimate, "sepfm/estimate", self._on_estimate, reliable)
-        self.create_subscription(MatchArray, "sepfm/matches", self._on_matches, reliable)
-        self.create_timer(float(self._values[DIAGNOSTIC_PERIOD]), self._report)
+        self._estimate_subs = [
+            self.create_subscription(
+                TwoViewEstimate, "sepfm/estimate", self._on_estimate, RELIABLE
+            ),
+            self.create_subscription(MatchArray, "sepfm/matches", self._on_matches, RELIABLE),
+        ]
         self.get_logger().info(
             f"rectifying {', '.join(s.topic for s in self._subs)} with the estimates of "
             f"{self.resolve_topic_name('sepfm/estimate')} into "
             f"{self.resolve_topic_name('left/image_rect')}, "
             f"{self.resolve_topic_name('right/image_rect')} ({self._encoding})"
         )
+
+    def deactivate_inputs(self) -> None:
+        """Destroy every subscription."""
+        for sub in self._subs:
+            sub.destroy()
+        for est in self._estimate_subs:
+            self.destroy_subscription(est)
+        self._subs, self._estimate_subs = [], []
 
     # ---------------------------------------------------------------- logging and counting
     def count(self, kind: str, n: int = 1) -> None:
@@ -300,6 +337,8 @@ class RectifyNode(Node):
         except ValueError as err:
             self._problem("size_change", f"skipping an image pair: {err}")
             return
+        if len(self._pub) != 2:
+            return  # cleaned up meanwhile
         self._pub[0].publish(numpy_to_image(out_a, self._encoding, copy_header(left.header)))
         self._pub[1].publish(numpy_to_image(out_b, self._encoding, copy_header(right.header)))
         self.count("published")
@@ -307,6 +346,8 @@ class RectifyNode(Node):
     # ---------------------------------------------------------------- health
     @guarded
     def _report(self) -> None:
+        if state_name(self) != "active":
+            return  # no output unless active
         with self._lock:
             values: dict[str, Any] = dict(sorted(self.counts.items()))
             rect, stamp, vd = self.rectification, self._rect_stamp_ns, self._rect_vertical_px

@@ -2,15 +2,12 @@
 
 Run it as ``sepfm_ros node --ros-args ...`` (or ``ros2 run sepfm_ros node --ros-args ...``).
 
-This module wires the parts together; each lives in its own module:
-
-- :mod:`sepfm_ros.ros.session.parameters`: the parameters, their validation and the pipeline config;
-- :mod:`sepfm_ros.ros.node.subscriptions`: the image topics (remaps, ``compressed``) and their QoS;
-- :mod:`sepfm_ros.stream.pairing`: stereo pairing by stamp, motion pairing by frame gap, and the
-  reset when stamps jump back;
-- :mod:`sepfm_ros.stream.scheduling`: the latest-only slots between the executor and the two
-  worker threads, and the policy when pairs come faster than the node processes them;
-- :mod:`sepfm_ros.stream.health`: counters, recent problems and the ``/diagnostics`` level.
+This module wires the parts together; each lives in its own module: the parameters
+(:mod:`sepfm_ros.ros.session.parameters`), the image topics and their QoS
+(:mod:`~sepfm_ros.ros.node.subscriptions`), the lifecycle, warm-up and demand
+(:mod:`~sepfm_ros.ros.node.lifecycle`), stereo and motion pairing
+(:mod:`sepfm_ros.stream.pairing`), the latest-only slots between the executor and the two worker
+threads (:mod:`~sepfm_ros.stream.scheduling`), and health (:mod:`~sepfm_ros.stream.health`).
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair frames and offer the pair to the scheduler. Two worker threads then run the
@@ -27,34 +24,39 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import Any, cast
 
-import numpy as np
-from diagnostic_msgs.msg import DiagnosticStatus
+from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
-from rclpy.node import Node
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from sepfm_ros.pipeline.pipeline import (
-    MatchedPair,
     name_native_thread,
 )
-from sepfm_ros.ros.msgs.diagnostics import health_status, status_name
+from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, status_name
 from sepfm_ros.ros.msgs.headers import copy_header, stamp_ns
 from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
-from sepfm_ros.ros.node.camera_info import CameraInfoInputs
+from sepfm_ros.ros.node.camera_info import CameraInfoInputs, calibration_in_use_text
 from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
+from sepfm_ros.ros.node.jobs import Job, MatchedJob
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
+from sepfm_ros.ros.node.lifecycle import (
+    IDLE,
+    WARMING_UP,
+    DemandGate,
+    KernelWarmUp,
+    ManagedNode,
+    start_when_ready,
+    state_name,
+)
 from sepfm_ros.ros.node.memory import release_free_memory
-from sepfm_ros.ros.node.outputs import NodeOutputs
+from sepfm_ros.ros.node.outputs import RELIABLE, NodeOutputs
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
 from sepfm_ros.ros.session.answer import (
     BadInput,
     PairAnswer,
-    PairHeaders,
     add_timings,
     decode_pair,
     internal_error_kind,
@@ -66,6 +68,7 @@ from sepfm_ros.ros.session.parameters import (
     DIAGNOSTIC_PERIOD,
     NODE_NAME,
     PARAMS,
+    always_on_default,
     change_errors,
     descriptor,
     parameter_error,
@@ -80,81 +83,73 @@ from sepfm_ros.stream.sync import LEFT, RIGHT
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 
 
-@dataclass
-class Job:
-    """A pair waiting for the worker: a = left/earlier, b = right/current."""
+class SepfmNode(ManagedNode):
+    """The ``sepfm`` node (see the module docstring), a lifecycle node
+    (:class:`~sepfm_ros.ros.node.lifecycle.ManagedNode`)."""
 
-    msg_a: Any
-    msg_b: Any
-    received: float  # time.monotonic() at receipt of the newer message
-    header: Header  # header of the newer image (copied to every output)
-    key_a: Any
-    key_b: Any
-
-    def headers(self) -> PairHeaders:
-        """The pair's output header and its images' headers."""
-        return PairHeaders(self.header, self.msg_a.header, self.msg_b.header)
-
-
-@dataclass
-class MatchedJob:
-    """A matched pair waiting for the estimate thread, or the failure record of a pair that
-    could not be matched (``failure``: published by the estimate thread too, so answers leave
-    in pair order)."""
-
-    job: Job
-    matched: MatchedPair | None
-    images: tuple[np.ndarray, np.ndarray] | None  # decoded a, b (for ~/debug_image)
-    wait_ms: float  # receipt -> start of processing (decode)
-    matched_at: float  # time.monotonic() when matching ended
-    failure: PairAnswer | None = None
-
-
-class SepfmNode(Node):
-    """The ``sepfm`` node (see the module docstring)."""
+    _session: Session
+    _pairing: StereoPairing[Any] | MotionPairing[Any]
+    _out: NodeOutputs
+    _scheduler: PairScheduler[Job, MatchedJob]
+    _workers: list[threading.Thread]
 
     def __init__(
-        self, node_name: str = NODE_NAME, dds: DdsSetup | None = None, **kwargs: Any
+        self,
+        node_name: str = NODE_NAME,
+        dds: DdsSetup | None = None,
+        warm: KernelWarmUp | None = None,
+        **kwargs: Any,
     ) -> None:
         """``dds``: the process's Fast DDS setup (:func:`sepfm_ros.ros.node.dds.configure_dds`), for
-        the log, ``/diagnostics`` and the advice on lost samples (None: not configured)."""
-        super().__init__(node_name, **kwargs)
+        the log, ``/diagnostics`` and the advice on lost samples (None: not configured).
+        ``warm``: the kernel warm-up the process started (None: configure warms up)."""
+        super().__init__(node_name, warm or KernelWarmUp(), **kwargs)
         self._dds = dds or DdsSetup(False, UNCONFIGURED)
         values = self._declare_parameters()
         self._mode = values["mode"]
         self._transport = values["image_transport"]
+        self._always_on = bool(values["always_on"])
         self._zero_step = ZeroStepNotes()  # step-0 images read as packed: warned once per topic
 
         self._lock = threading.Lock()  # guards the settings below and the pairing
         self._epipolar_lines = int(values["debug_epipolar_lines"])
-        self._scheduler: PairScheduler[Job, MatchedJob] = PairScheduler()
         names = ("left", "right") if self._mode == "stereo" else ("image",)
         self._health = Health(names, float(values["input_timeout_s"]))
         self._log = ThrottledLog(self)
         self._reported_stall: str | None = None
-
-        self._out = NodeOutputs(self)
+        self._diagnostics = self.create_publisher(DiagnosticArray, "/diagnostics", RELIABLE)
 
         self._qos_switches: Counter[str] = Counter()  # input_reliability auto, by new reliability
-        inputs = self._input_callbacks()
-        self._subs = self._input_subscriptions(inputs, values["input_reliability"])
-        bases = [base for base, _ in inputs]
+        self._inputs = self._input_callbacks()
+        self._bases = [base for base, _ in self._inputs]
+        self._subs: list[InputSubscription] = []
+        self._camera_info: CameraInfoInputs | None = None
+        self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
+        self._demand = DemandGate(self, self._wanted, self._subscribe, self._unsubscribe)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self._diag_timer = self.create_timer(values[DIAGNOSTIC_PERIOD], self._report_health)
+        self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
+        self._stall_timer.cancel()  # runs while the inputs are held (no wake-ups while idle)
+        if values["autostart"]:
+            start_when_ready(self)
+
+    def configure_node(self, warm_s: float) -> None:
+        """The pipeline, the outputs and the workers (the kernels are ready)."""
+        values = self._param_values()
         self._session = Session(
             values,
             self._mode == "stereo",
-            [self.resolve_topic_name(b) for b in bases],
+            [self.resolve_topic_name(b) for b in self._bases],
             self.get_fully_qualified_name(),
             self.get_fully_qualified_name(),
             cache_size=8,
             parallel_detect=True,
         )
         self._pairing = self._session.pairing()
-        self._camera_info = self._camera_info_inputs(values, bases)
-        self._calib_status: DiagnosticStatus | None = None  # latest, also in /diagnostics
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
-        self._diag_timer = self.create_timer(values[DIAGNOSTIC_PERIOD], self._report_health)
-        self._stall_timer = self.create_timer(STALL_CHECK_PERIOD_S, self._check_level_change)
+        self._scheduler = PairScheduler()
+        self._out = NodeOutputs(self, self._diagnostics)
+        self._calib_status = None
         self._workers = [
             threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
             threading.Thread(target=self._estimate_loop, name="sepfm-estimate", daemon=True),
@@ -162,10 +157,54 @@ class SepfmNode(Node):
         for worker in self._workers:
             worker.start()
         self.get_logger().info(
-            f"{self._mode} mode, {self._transport} transport, input reliability "
-            f"{values['input_reliability']}, listening on "
-            f"{', '.join(s.topic for s in self._subs)}; {self._session.pipeline.config}"
+            f"configured (estimator kernels ready in {warm_s:.1f} s): {self._mode} mode, "
+            f"{self._transport} transport, input reliability {values['input_reliability']}, "
+            f"{'always on' if self._always_on else 'on demand'}; {self._session.pipeline.config}"
         )
+
+    def activate_inputs(self) -> None:
+        """Hold the inputs while there is demand."""
+        self._demand.enable()
+        if not self._demand.on:
+            self.get_logger().info("active, idle: no subscribers to the outputs yet")
+
+    def deactivate_inputs(self) -> None:
+        self._demand.disable()
+
+    def release_node(self) -> None:
+        """Stop the workers and destroy the outputs."""
+        self.shutdown()
+        self._out.destroy()
+
+    def _wanted(self) -> bool:
+        """Whether the node should hold its inputs: ``always_on``, or an answer subscriber."""
+        return self._always_on or self._out.demand() > 0
+
+    def _subscribe(self) -> None:
+        """Demand came: subscribe to the inputs with fresh pairing (no pair of older frames)."""
+        with self._lock:
+            self._pairing = self._session.pairing()
+        self._scheduler.reset_input()
+        self._health.restart_input()
+        self._stall_timer.reset()
+        values = self._param_values()
+        self._subs = self._input_subscriptions(self._inputs, values["input_reliability"])
+        if self._camera_info is None:
+            self._camera_info = self._camera_info_inputs(values, self._bases)
+        else:
+            self._camera_info.resume()
+        why = "always_on" if self._always_on else "the outputs have subscribers"
+        self.get_logger().info(f"answering ({why}): on {', '.join(s.topic for s in self._subs)}")
+
+    def _unsubscribe(self) -> None:
+        """Demand left (or deactivate): release the inputs."""
+        for sub in self._subs:
+            sub.destroy()
+        self._subs = []
+        self._stall_timer.cancel()
+        if self._camera_info is not None:
+            self._camera_info.pause()
+        self.get_logger().info("idle: no subscribers to the outputs; input subscriptions released")
 
     def _declare_parameters(self) -> dict[str, Any]:
         """Declare every parameter; their values (ValueError listing the invalid ones)."""
@@ -174,7 +213,10 @@ class SepfmNode(Node):
         for text in texts:
             self.get_logger().warning(text)
         for name, spec in PARAMS.items():
-            self.declare_parameter(name, aliased.get(name, spec.default), descriptor(name, spec))
+            default = aliased.get(name, spec.default)
+            if name == "always_on":  # its default follows mode and use_camera_info (declared)
+                default = always_on_default(self._param_values(["mode", "use_camera_info"]))
+            self.declare_parameter(name, default, descriptor(name, spec))
         values = self._param_values()
         errors = [e for n, v in values.items() if (e := parameter_error(n, v))]
         if errors:
@@ -210,25 +252,17 @@ class SepfmNode(Node):
             for base, callback in inputs
         ]
 
-    def _camera_info_inputs(
-        self, values: dict[str, Any], bases: list[str]
-    ) -> CameraInfoInputs | None:
-        """The camera_info subscriptions beside the image inputs ``bases`` (None unless the
-        ``use_camera_info`` parameter is set)."""
+    def _camera_info_inputs(self, values: dict[str, Any], bases: list[str]) -> Any:
+        """The camera_info subscriptions beside the image inputs ``bases`` (a
+        :class:`CameraInfoInputs`; None unless the ``use_camera_info`` parameter is set)."""
         if not values["use_camera_info"]:
             return None
-        return CameraInfoInputs(
-            self,
-            bases,
-            values["input_reliability"],
-            on_lost=self._on_lost,
-            on_incompatible=self._on_incompatible,
-            on_created=self._on_subscribed,
-        )
+        events = (self._on_lost, self._on_incompatible, self._on_subscribed)
+        return CameraInfoInputs(self, bases, values["input_reliability"], *events)
 
     # ---------------------------------------------------------------- parameters
-    def _param_values(self) -> dict[str, Any]:
-        return {name: self.get_parameter(name).value for name in PARAMS}
+    def _param_values(self, names: Any = PARAMS) -> dict[str, Any]:
+        return {name: self.get_parameter(name).value for name in names}
 
     def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
         changes = {p.name: p.value for p in params}
@@ -241,6 +275,9 @@ class SepfmNode(Node):
 
     def _apply_parameters(self, params: list[Parameter]) -> None:
         values = self._param_values()
+        self._always_on = bool(values["always_on"])  # the demand gate follows it
+        if not self.configured:
+            return  # read at configure
         self._session.configure(values)
         with self._lock:
             self._epipolar_lines = int(values["debug_epipolar_lines"])
@@ -442,18 +479,9 @@ class SepfmNode(Node):
         yet, or camera_info not used); an image without one is counted and logged."""
         if self._camera_info is None:
             return None
-        msgs = (job.msg_a, job.msg_b) if self._mode == "stereo" else (job.msg_b,)
-        stamps = [stamp_ns(m.header.stamp) for m in msgs]
+        msgs = [job.msg_a, job.msg_b] if self._mode == "stereo" else [job.msg_b]
         slop_ns = int(round(float(self._session.values["sync_slop_s"]) * 1e9))
-        infos, missing = self._camera_info.for_stamps(stamps, slop_ns)
-        for k in missing:
-            self._log.log(
-                "camera_info_unmatched",
-                f"no camera_info on {self._camera_info.topics[k]} stamped within sync_slop_s of "
-                f"the image stamped {stamps[k] / 1e9:.3f} s: answered with the latest one",
-                error=False,
-            )
-        return infos
+        return self._camera_info.for_images(msgs, slop_ns, self._log)
 
     def _log_cameras(self, update: CamerasUpdate | None) -> None:
         """Count and log unusable camera_info; log a calibration newly in use."""
@@ -463,17 +491,7 @@ class SepfmNode(Node):
             self._health.problem("camera_info_invalid")
             self._log.log("camera_info_invalid", f"camera_info unusable: {update.reason}")
         elif update.changed:
-            calibration = self._session.calibrated.calibration
-            self.get_logger().info(
-                "camera_info in use: F in undistorted pixels of K"
-                + (", rectified images" if calibration.rectified else "")
-                + (
-                    f", no calibration check ({calibration.rig_problem})"
-                    if calibration.rig_problem
-                    else ""
-                )
-                + ("" if calibration.rig is None else ", stereo calibration check on")
-            )
+            self.get_logger().info(calibration_in_use_text(self._session.calibrated.calibration))
 
     def _estimate_and_publish(self, item: MatchedJob) -> None:
         job = item.job
@@ -504,9 +522,12 @@ class SepfmNode(Node):
         values.update(self._scheduler.snapshot())
         # publishers matched by the input subscriptions (the fewest over the inputs): a player
         # can wait for this before sending, since a message sent before matching is lost
-        values["input_publishers"] = min(s.publisher_count() for s in self._subs)
-        for sub, name in zip(self._subs, self._health.topics, strict=True):
-            values[f"input_reliability_{name}"] = sub.reliability or "waiting for publishers"
+        values["input_publishers"] = min((s.publisher_count() for s in self._subs), default=0)
+        for k, name in enumerate(self._health.topics):
+            sub = self._subs[k] if self._subs else None
+            values[f"input_reliability_{name}"] = (
+                "idle" if sub is None else sub.reliability or "waiting for publishers"
+            )
         # input_reliability auto: subscriptions recreated for a change of the publishers, by kind
         with self._lock:
             switches = dict(self._qos_switches)
@@ -538,11 +559,24 @@ class SepfmNode(Node):
 
     @guarded
     def _report_health(self) -> None:
+        """The ``/diagnostics`` report: warming up (any state), or the health while active
+        (idle: OK, no stall check); nothing while inactive or unconfigured."""
+        if not self.kernels_ready:
+            self._report_status(OK, WARMING_UP, {"lifecycle_state": state_name(self)})
+            return
+        if state_name(self) != "active":
+            return
         release_free_memory()
         values = self.health()
-        stall = self._health.stall()
-        level, message = self._health.level(stall)
+        if self._demand.on:
+            stall = self._health.stall()
+            level, message = self._health.level(stall)
+        else:
+            stall, (level, message) = None, (OK, IDLE)
         self._reported_stall = stall
+        self._report_status(level, message, values)
+
+    def _report_status(self, level: int, message: str, values: dict[str, Any]) -> None:
         status = health_status(
             status_name(self.get_fully_qualified_name(), "node"),
             LEVEL_BYTES[level],
@@ -554,10 +588,13 @@ class SepfmNode(Node):
         with self._lock:
             if self._calib_status is not None:
                 statuses.append(self._calib_status)
-        self._out.report(self.get_clock().now().to_msg(), statuses)
+        stamp = self.get_clock().now().to_msg()
+        self._diagnostics.publish(diagnostic_array(Header(stamp=stamp, frame_id=""), statuses))
 
     def shutdown(self) -> None:
-        """Stop the worker threads (waits for the pairs in progress)."""
+        """Stop the worker threads (waits for the pairs in progress; none before configure)."""
+        if not hasattr(self, "_scheduler"):
+            return
         self._scheduler.stop()
         for worker in self._workers:
             worker.join(timeout=10.0)

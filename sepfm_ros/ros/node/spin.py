@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import argparse
 import sys
-import threading
 from collections.abc import Callable
 from typing import TypeVar
 
@@ -16,9 +15,6 @@ from rclpy.exceptions import ParameterException
 from rclpy.executors import Executor, ExternalShutdownException, SingleThreadedExecutor
 from rclpy.node import Node
 from threadpoolctl import threadpool_limits
-
-from sepfm_ros.pipeline.compiled import warm_up
-from sepfm_ros.ros.node.signals import install_stop_handlers, restore_handlers
 
 N = TypeVar("N", bound=Node)
 
@@ -119,28 +115,3 @@ def limit_thread_pools(threads: int = 1) -> None:
     """
     cv2.setNumThreads(int(threads))
     threadpool_limits(limits=int(threads), user_api="blas")
-
-
-def warm_up_interruptibly() -> float | None:
-    """:func:`warm_up` in a thread, so SIGINT / SIGTERM stop the node while kernels compile.
-
-    numba compiles on: a KeyboardInterrupt raised in the compiling thread is lost. Returns the
-    seconds spent, or None when interrupted (the thread is left to the process's exit).
-
-    Both signals get a handler here (:func:`install_stop_handlers`; rclpy's handlers,
-    installed later, take SIGINT whatever the process inherited).
-    """
-    done: dict[str, float] = {}
-    thread = threading.Thread(
-        target=lambda: done.update(s=warm_up()), name="kernel-warm-up", daemon=True
-    )
-    previous = install_stop_handlers()
-    try:
-        thread.start()
-        while thread.is_alive():
-            thread.join(0.1)
-    except KeyboardInterrupt:
-        return None
-    finally:
-        restore_handlers(previous)
-    return done.get("s", 0.0)

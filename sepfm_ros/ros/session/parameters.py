@@ -224,7 +224,29 @@ PARAMS: dict[str, ParamSpec] = {
         0.05,
         60.0,
     ),
+    "always_on": ParamSpec(
+        False,
+        "process the input even without subscribers to ~/estimate, ~/matches, the pose outputs"
+        " and ~/debug_image (monitoring); false: hold no image subscription without them",
+    ),
+    "autostart": ParamSpec(
+        True,
+        "configure and activate the lifecycle node at start; false: wait for a lifecycle manager",
+        read_only=True,
+    ),
 }
+
+# parameters whose default follows other parameters (config/sepfm.yaml leaves them out): the rule
+COMPUTED_DEFAULTS = {
+    "always_on": "(true in stereo mode with use_camera_info: calibrated stereo; else false)"
+}
+
+
+def always_on_default(values: Mapping[str, Any]) -> bool:
+    """``always_on``'s default: true for calibrated stereo (mode stereo, use_camera_info), where
+    the calibration check is the point of running; false otherwise."""
+    return values["mode"] == "stereo" and bool(values["use_camera_info"])
+
 
 PIPELINE_PARAMS = {
     "features": "features",
@@ -300,7 +322,8 @@ def parameters_help(params: Mapping[str, ParamSpec] = PARAMS) -> str:
         else:
             rng = f" [{spec.low}, {spec.high}]"
         ro = " (read-only)" if spec.read_only else ""
-        lines.append(f"  {name} = {spec.default!r}{rng}{ro}: {spec.description}")
+        default = COMPUTED_DEFAULTS.get(name, repr(spec.default)) if params is PARAMS else None
+        lines.append(f"  {name} = {default or repr(spec.default)}{rng}{ro}: {spec.description}")
     return "\n".join(lines)
 
 

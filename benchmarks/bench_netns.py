@@ -50,7 +50,9 @@ def main(argv: list[str] | None = None) -> int:
         )
         print("|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---|")
         for transport, qos in RUNS:
-            r = netns_rig.run_link(transport, a.seconds, Path(tmp) / f"{transport}_{qos}", domain, qos)
+            r = netns_rig.run_link(
+                transport, a.seconds, Path(tmp) / f"{transport}_{qos}", domain, qos
+            )
             print(
                 f"| {transport}, {qos} | {r.frames} | {r.published} | {r.received} | "
                 f"{r.answered} ({100 * r.answered_share:.0f} %) | {r.frames_missing} | "

@@ -143,6 +143,7 @@ class RunResult:
     answered_share: float  # answered / (frames - 1): the pairs of the camera's stream
     frames_missing: int  # the node's count of frames missing from the stamp sequence
     lost_samples: int  # DDS lost samples the node counted
+    dropped_pairs: int  # pairs the node dropped for newer ones while busy (CPU, not the link)
     level: int  # the node's last /diagnostics level
     message: str  # and its message
     warned_missing: bool  # a report named the frames missing
@@ -150,9 +151,12 @@ class RunResult:
     latency_p95_ms: float
 
 
-def run_link(transport: str, seconds: float, workdir: Path, domain_id: int) -> RunResult:
-    """Create the link, run the camera (``transport`` raw or compressed, ``seconds`` of stream)
-    and the node with a probe across it, delete the link; the run's figures."""
+def run_link(
+    transport: str, seconds: float, workdir: Path, domain_id: int, reliability: str = "reliable"
+) -> RunResult:
+    """Create the link, run the camera (``transport`` raw or compressed, ``seconds`` of stream,
+    publisher ``reliability`` reliable or best_effort) and the node with a probe across it,
+    delete the link; the run's figures."""
     workdir.mkdir(parents=True, exist_ok=True)
     env = link_env(domain_id)
     py = sys.executable
@@ -177,7 +181,7 @@ def run_link(transport: str, seconds: float, workdir: Path, domain_id: int) -> R
         camera = link.exec(
             link.cam,
             [py, __file__, "camera", "--transport", transport, "--seconds", str(seconds),
-             "--out", str(cam_out)],
+             "--out", str(cam_out), "--reliability", reliability],
             workdir / f"camera_{transport}.log", dict(env, FASTDDS_BUILTIN_TRANSPORTS="UDPv4"),
         )  # fmt: skip
         procs.append(camera)
@@ -219,6 +223,7 @@ def _result(transport: str, cam: dict, probe: dict) -> RunResult:
         len(latencies) / max(1, int(cam["frames"]) - 1),
         int(values.get("frames_missing", 0)),
         int(values.get("lost_samples", 0)),
+        int(values.get("dropped_pairs", 0)),
         int(probe["level"]),
         probe["message"],
         bool(probe["warned_missing"]),
@@ -228,7 +233,7 @@ def _result(transport: str, cam: dict, probe: dict) -> RunResult:
 
 
 # ------------------------------------------------------------------------ the two processes
-def camera_main(transport: str, seconds: float, out: Path) -> None:
+def camera_main(transport: str, seconds: float, out: Path, reliability: str) -> None:
     """Publish ``seconds`` of a 10 Hz stream once the node's subscription matched; write the
     published stamps to ``out``."""
     import cv2
@@ -243,7 +248,10 @@ def camera_main(transport: str, seconds: float, out: Path) -> None:
     frames = [cv2.imread(str(p)) for p in sorted((SHARED / "templeRing").glob("*.png"))]
     rclpy.init()
     node = rclpy.create_node("camera")
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    policy = ReliabilityPolicy.RELIABLE
+    if reliability == "best_effort":
+        policy = ReliabilityPolicy.BEST_EFFORT
+    qos = QoSProfile(depth=10, reliability=policy)
     compressed = transport == "compressed"
     pub = node.create_publisher(
         CompressedImage if compressed else Image, TOPIC + ("/compressed" if compressed else ""), qos
@@ -324,11 +332,12 @@ def main() -> None:
     cam.add_argument("--transport", choices=("raw", "compressed"), required=True)
     cam.add_argument("--seconds", type=float, required=True)
     cam.add_argument("--out", type=Path, required=True)
+    cam.add_argument("--reliability", choices=("reliable", "best_effort"), default="reliable")
     probe = sub.add_parser("probe")
     probe.add_argument("--out", type=Path, required=True)
     args = p.parse_args()
     if args.part == "camera":
-        camera_main(args.transport, args.seconds, args.out)
+        camera_main(args.transport, args.seconds, args.out, args.reliability)
     else:
         probe_main(args.out)
 

@@ -23,7 +23,6 @@ from dataclasses import dataclass
 
 import numpy as np
 from scipy.spatial.transform import Rotation
-from scipy.stats import norm
 
 from sepfm_ros.geometry.epipolar import homogeneous, skew
 
@@ -146,6 +145,16 @@ def sampson_jacobian(
     return r0, J
 
 
+def _phi(c: float) -> float:
+    """The standard normal density at ``c``."""
+    return math.exp(-0.5 * c * c) / math.sqrt(2.0 * math.pi)
+
+
+def _Phi(c: float) -> float:
+    """The standard normal distribution function at ``c``."""
+    return 0.5 * (1.0 + math.erf(c / math.sqrt(2.0)))
+
+
 def truncated_sigma(rms: float, cut: float) -> float:
     """The std sigma of a zero-mean Gaussian whose values within +-cut have this rms.
 
@@ -162,7 +171,7 @@ def truncated_sigma(rms: float, cut: float) -> float:
         return float(cut)
 
     def kept(c: float) -> float:  # (rms / cut)^2 of a Gaussian cut at c sigma
-        return float((1 - 2 * c * norm.pdf(c) / (2 * norm.cdf(c) - 1)) / c**2)
+        return float((1 - 2 * c * _phi(c) / (2 * _Phi(c) - 1)) / c**2)
 
     lo, hi = 1e-3, 60.0  # kept() falls from 1/3 to 0 over c in (0, inf)
     for _ in range(80):
@@ -181,9 +190,9 @@ def cut_variance_factor(c: float) -> float:
     kept match (J^T J summed over the inliers) that is ``g(c) P^2 / (P - 2 c phi(c))^2``
     (1.29 at c = 2; 1 as c grows).
     """
-    P = 2 * norm.cdf(c) - 1
-    g = 1 - 2 * c * norm.pdf(c) / P
-    slope = P - 2 * c * norm.pdf(c)
+    P = 2 * _Phi(c) - 1
+    g = 1 - 2 * c * _phi(c) / P
+    slope = P - 2 * c * _phi(c)
     if not slope > 0:
         return math.inf
     return float(g * P**2 / slope**2)

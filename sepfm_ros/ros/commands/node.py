@@ -70,11 +70,12 @@ def main(argv: list[str]) -> int:
     warm = KernelWarmUp()
 
     def make_node() -> SepfmNode:
-        # after rclpy.init (its SIGINT/SIGTERM handlers stop a compile too): compile (fresh
-        # install) or load the estimator's kernels on a thread of their own; the node is in the
-        # graph, answering its lifecycle services, meanwhile, and configure waits for them
-        warm.start()
         node = SepfmNode(dds=dds, warm=warm)
+        # after rclpy.init (its SIGINT/SIGTERM handlers stop a compile too) and after the node
+        # is in the graph (the warm-up holds the GIL for much of its time): compile (fresh
+        # install) or load the estimator's kernels on a thread of their own; the node answers
+        # its lifecycle services meanwhile, and configure waits for them
+        warm.start()
         node.get_logger().info(
             f"memory: malloc thresholds {'fixed' if malloc_fixed else 'left (not glibc)'}, "
             + ("DDS subscriptions with DYNAMIC history" if dds.profiles else "DDS config left")

@@ -107,6 +107,9 @@ setup(
             "ros-jazzy-common-interfaces",
         ],
         "poselib": ["poselib"],
+        # SupeRANSAC (`eval`'s superansac methods and the benchmarks): pysuperansac ships one
+        # wheel, CPython 3.11 on x86_64 Linux, and no source distribution
+        "superansac": ["pysuperansac"],
         # `sepfm_ros audit`: the fleet audit runs on Dask distributed (chosen over Ray:
         # docs/design.md, figures in docs/benchmarks.md); psutil is distributed's own dependency.
         # python3-distributed-pip in package.xml / rosdep.yaml.
@@ -119,6 +122,8 @@ setup(
             "colcon-core",
             "colcon-ros",
             "poselib",
+            # where its one wheel installs; elsewhere its tests skip (they fail under CI)
+            "pysuperansac; python_version == '3.11' and platform_machine == 'x86_64'",
             "distributed>=2024.1",  # the audit tests (the fleet extra)
             # colcon builds sepfm_msgs against this environment's ROS wheels (test_colcon_run):
             # the ros-jazzy-* build requirements of sepfm_msgs/pyproject.toml (test_package

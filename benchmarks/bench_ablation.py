@@ -4,7 +4,7 @@ The default method (``sepfm_ros.geometry.DEFAULT_METHOD`` with default ``Estimat
 run beside variants that each switch one component off (or on, for components that are off by
 default), the same method with every component of the shared RANSAC framework off at once, the
 other separable method and seven-point RANSAC (the separable part off), and the anchors
-(USAC_MAGSAC, USAC_ACCURATE and PoseLib when installed) on the same SIFT matches.
+(USAC_MAGSAC, USAC_ACCURATE, and PoseLib and SupeRANSAC when installed) on the same SIFT matches.
 
 Sets (threshold 1 px, confidence 0.99):
 
@@ -36,7 +36,7 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
-from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
+from sepfm_ros.evaluation.methods import REGISTRY, poselib_available, superansac_methods
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, estimate_fundamental
 from sepfm_ros.geometry.compiled import warm_up as warm_up_geometry
@@ -84,6 +84,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "ransac7, framework components off": ("ransac7", FRAMEWORK_OFF),
 }
 ANCHORS = ["cv-magsac", "cv-accurate"] + (["poselib"] if poselib_available() else [])
+ANCHORS += superansac_methods()
 
 
 def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, dict]:

@@ -1,4 +1,4 @@
-"""Benchmark: the separable estimator against OpenCV, PoseLib and our own baselines on real pairs.
+"""Benchmark: the separable estimator against OpenCV, PoseLib, SupeRANSAC and our own baselines.
 
 On the pairs of ../shared/data/pairs.json with SIFT matches at ratio 0.75 and at a hard 0.95, all
 methods run in the same process on the same matches at equal threshold (1 px) and confidence
@@ -27,7 +27,7 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
-from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
+from sepfm_ros.evaluation.methods import REGISTRY, poselib_available, superansac_methods
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD
 
@@ -35,6 +35,7 @@ REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data"
 METHODS = ["sep4", "sep5", "ransac7", "ransac8", "cv-ransac", "cv-lmeds", "cv-magsac",
            "cv-accurate"] + (["poselib"] if poselib_available() else [])  # fmt: skip
+METHODS += superansac_methods()
 
 
 def run_setting(
@@ -129,7 +130,8 @@ def headline(settings: dict[float, dict]) -> str:
     """README's headline table: F-score and median ms per pair of our methods, OpenCV's and
     PoseLib's, one column pair per SIFT ratio setting."""
     names = [m for m in ("sep4", "sep5", "ransac7", "cv-ransac", "cv-magsac", "cv-accurate",
-                         "poselib") if m in METHODS]  # fmt: skip
+                         "poselib", "superansac", "superansac-adaptive")
+             if m in METHODS]  # fmt: skip
     head = "| method | " + " | ".join(
         f"F-score (SIFT {r}) | ms per pair (SIFT {r})" for r in settings
     )

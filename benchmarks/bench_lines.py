@@ -45,15 +45,17 @@ from lines_prefetch import prefetch
 
 from sepfm_ros.evaluation.manifest import PairSpec, load_manifest
 from sepfm_ros.evaluation.matches_cache import file_hash
-from sepfm_ros.evaluation.methods import poselib_available, resolve_methods
+from sepfm_ros.evaluation.methods import poselib_available, resolve_methods, superansac_methods
 from sepfm_ros.geometry import estimate_fundamental
 from sepfm_ros.geometry.compiled import warm_up as warm_up_geometry
 
 REPO = Path(__file__).resolve().parent.parent
 DATA = REPO.parent / "shared" / "data_lines"
 EVAL_DOC = REPO / "docs" / "eval" / "strecha_paper_protocol.md"
-METHODS = ["sep5", "sep4", "ransac7", "ransac8", "cv-accurate", "cv-magsac", "cv-ransac"] + (
-    ["poselib"] if poselib_available() else []
+METHODS = (
+    ["sep5", "sep4", "ransac7", "ransac8", "cv-accurate", "cv-magsac", "cv-ransac"]
+    + (["poselib"] if poselib_available() else [])
+    + superansac_methods()
 )
 #: label -> (SIFT ratio, threshold px); confidence is 0.99 in all
 SETTINGS = {
@@ -172,7 +174,7 @@ def ratio_lines(rows: dict, methods: list[str], default: str) -> list[str]:
     if default in fs:
         diffs = [
             f"minus {b}'s: {fs[default] - fs[b]:+.3f}" if b in fs else f"minus {b}'s: n/a (not run)"
-            for b in ("cv-accurate", "poselib")
+            for b in ("cv-accurate", "poselib", "superansac", "superansac-adaptive")
         ]
         out.append(f"- default method ({default}) F-score " + "; ".join(diffs))
     else:

@@ -38,7 +38,12 @@ import bench_docs
 import cv2
 import numpy as np
 
-from sepfm_ros.evaluation.methods import REGISTRY, poselib_available, resolve_methods
+from sepfm_ros.evaluation.methods import (
+    REGISTRY,
+    poselib_available,
+    resolve_methods,
+    superansac_methods,
+)
 from sepfm_ros.evaluation.metrics import (
     MIN_RECOVERED_POSITIVES,
     pose_errors,
@@ -66,6 +71,7 @@ METHODS = [DEFAULT_METHOD] + [
 ]
 if poselib_available():
     METHODS.append("poselib")
+METHODS += superansac_methods()
 
 
 @dataclass

@@ -5,7 +5,8 @@ Real SIFT matches (ratio 0.8) of every STEP-th pair of ../shared/data get extra 
 the outliers sit on real features) until the outlier rate (matches > 1 px from the GT F) reaches
 each target. Every method runs at its defaults on the same matches (threshold 1 px, confidence
 0.99): ours (sep4, sep5, ransac7, ransac8) and the anchors (OpenCV's FM_RANSAC, USAC_MAGSAC,
-USAC_ACCURATE, and PoseLib when installed). Printed per target: success (median GT-inlier error
+USAC_ACCURATE, and PoseLib and SupeRANSAC when installed).
+Printed per target: success (median GT-inlier error
 < 1 px and >= 20 GT inliers recovered), F-score against the GT inliers, median hypotheses (n/a
 for OpenCV), median ms and median ms over USAC_MAGSAC's in the same run, the median per-pair
 ratios sep4 / ransac7 of hypotheses (models scored) and of samples drawn (the paper's F(k, r))
@@ -34,7 +35,7 @@ import numpy as np
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
-from sepfm_ros.evaluation.methods import REGISTRY, poselib_available
+from sepfm_ros.evaluation.methods import REGISTRY, poselib_available, superansac_methods
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, EstimatorOptions, estimate_fundamental
 from sepfm_ros.geometry.fundamental.task import sample_cap
@@ -45,6 +46,7 @@ DATA = REPO.parent / "shared" / "data"
 METHODS = ("sep4", "sep5", "ransac7", "ransac8")
 #: the anchors, run through the evaluation registry at their defaults
 ANCHORS = ("cv-ransac", "cv-magsac", "cv-accurate") + (("poselib",) if poselib_available() else ())
+ANCHORS += tuple(superansac_methods())
 
 
 def with_outliers(pts_a, pts_b, pos, rate, rng):

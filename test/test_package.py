@@ -139,7 +139,7 @@ MODULE_KEYS = {
     **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},
 }
 # Imported only where present; the code and tests say so when it is missing.
-OPTIONAL_MODULES = {"poselib"}
+OPTIONAL_MODULES = {"poselib", "pysuperansac"}
 
 
 def _package_xml(folder: Path = REPO_ROOT) -> dict[str, set[str]]:

@@ -13,6 +13,17 @@
   installed: its LO-RANSAC with bundle refinement, ``max_epipolar_error`` = threshold,
   ``success_prob`` = confidence, ``seed`` = seed, other options at PoseLib's defaults; its RANSAC
   iterations are reported as hypotheses (samples drawn).
+- SupeRANSAC ``pysuperansac.estimateFundamentalMatrix`` (Barath et al. 2025), when the optional
+  ``superansac`` extra is installed (``pysuperansac`` ships a CPython 3.11 wheel only), twice:
+  ``superansac`` at its defaults (MAGSAC++ scoring, PROSAC sampling, nested-RANSAC local and
+  iterated least-squares final optimisation, ``min_iterations`` 1000, ``max_iterations`` 5000)
+  and ``superansac-adaptive``, the same with ``min_iterations`` 1, so that its adaptive RANSAC
+  stopping alone decides, as it does for the other methods. Its ``inlier_threshold`` is a Sampson
+  distance in pixels; a match whose two point-line distances are both d has symmetric epipolar
+  distance d and Sampson distance d / sqrt(2), so it gets ``threshold / sqrt(2)``.
+  ``confidence`` = confidence; the matches go in the order given (best first, PROSAC's order).
+  It takes no seed (its own generator is seeded inside), so the seed is not used. Its returned
+  iterations are reported as hypotheses.
 
 Every method gets the same matches, threshold (px) and confidence, and is timed the same way.
 """
@@ -20,6 +31,7 @@ Every method gets the same matches, threshold (px) and confidence, and is timed 
 from __future__ import annotations
 
 import importlib.util
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -72,7 +84,8 @@ Runner = Callable[
 @dataclass(frozen=True)
 class Method:
     """A registered estimator: ``name`` as in the report, ``family`` ("ours", "opencv",
-    "poselib"), whether it is one of the paper's separable methods, and how to run it."""
+    "poselib", "superansac"), whether it is one of the paper's separable methods, and how to
+    run it."""
 
     name: str
     family: str
@@ -155,6 +168,66 @@ def poselib_available() -> bool:
     return importlib.util.find_spec("poselib") is not None
 
 
+#: SupeRANSAC's min_iterations for ``superansac-adaptive`` (its default is 1000): 1 leaves the
+#: stop to its adaptive RANSAC criterion at the run's confidence.
+SUPERANSAC_ADAPTIVE_MIN_ITERATIONS = 1
+
+
+def _superansac(min_iterations: int | None) -> Runner:
+    """Runner of ``pysuperansac.estimateFundamentalMatrix``; ``min_iterations`` None keeps its
+    default (1000)."""
+
+    def run(pts_a, pts_b, size_a, size_b, threshold, confidence, seed) -> MethodResult:
+        import pysuperansac
+
+        # a fresh settings object per call: the call rescales inlier_threshold in place
+        settings = pysuperansac.RANSACSettings()
+        settings.inlier_threshold = float(threshold) / math.sqrt(2.0)  # symmetric px -> Sampson
+        settings.confidence = float(confidence)
+        if min_iterations is not None:
+            settings.min_iterations = int(min_iterations)
+        corr = np.ascontiguousarray(np.hstack([pts_a, pts_b]), dtype=np.float64)
+        sizes = [float(size_a[0]), float(size_a[1]), float(size_b[0]), float(size_b[1])]
+        t0 = time.perf_counter()
+        F, inliers, _score, iters = pysuperansac.estimateFundamentalMatrix(
+            corr, sizes, [], settings
+        )
+        ms = (time.perf_counter() - t0) * 1e3
+        F = np.asarray(F, dtype=np.float64)
+        if F.shape != (3, 3) or not np.all(np.isfinite(F)) or np.linalg.norm(F) == 0:
+            return MethodResult(None, 0, int(iters), None, None, ms, status="no model")
+        return MethodResult(normalize_fundamental(F), len(inliers), int(iters), None, None, ms)
+
+    return run
+
+
+def superansac_available() -> bool:
+    """True when the optional SupeRANSAC package (``pysuperansac``) can be imported."""
+    return importlib.util.find_spec("pysuperansac") is not None
+
+
+def superansac_methods() -> list[str]:
+    """The SupeRANSAC methods when ``pysuperansac`` is installed, else none (for benchmarks)."""
+    return ["superansac", "superansac-adaptive"] if superansac_available() else []
+
+
+#: family -> (whether it is installed, what the error says to install)
+_OPTIONAL: dict[str, tuple[Callable[[], bool], str]] = {
+    "poselib": (poselib_available, "PoseLib: pip install 'sepfm_ros[poselib]'"),
+    "superansac": (
+        superansac_available,
+        "SupeRANSAC: pip install 'sepfm_ros[superansac]' (pysuperansac has a wheel for "
+        "CPython 3.11 on x86_64 Linux only)",
+    ),
+}
+
+
+def _usable(name: str) -> bool:
+    """True when method ``name``'s optional package, if it needs one, is installed."""
+    family = REGISTRY[name].family
+    return family not in _OPTIONAL or _OPTIONAL[family][0]()
+
+
 def _registry() -> dict[str, Method]:
     reg: dict[str, Method] = {}
     for name in GEOMETRY_METHODS:
@@ -174,6 +247,14 @@ def _registry() -> dict[str, Method]:
         reg[name] = Method(name, "opencv", desc, _opencv(flag))
     desc = "poselib.estimate_fundamental (LO-RANSAC + refinement; PoseLib's min_iterations 1000)"
     reg["poselib"] = Method("poselib", "poselib", desc, _poselib)
+    desc = "pysuperansac.estimateFundamentalMatrix at its defaults (min_iterations 1000)"
+    reg["superansac"] = Method("superansac", "superansac", desc, _superansac(None))
+    desc = (
+        "pysuperansac.estimateFundamentalMatrix, adaptive stopping below 1000 iterations "
+        f"(min_iterations {SUPERANSAC_ADAPTIVE_MIN_ITERATIONS})"
+    )
+    adaptive = _superansac(SUPERANSAC_ADAPTIVE_MIN_ITERATIONS)
+    reg["superansac-adaptive"] = Method("superansac-adaptive", "superansac", desc, adaptive)
     return reg
 
 
@@ -182,8 +263,9 @@ REGISTRY: dict[str, Method] = _registry()
 
 
 def available_methods() -> list[str]:
-    """Names of the registered methods usable here (PoseLib only when installed)."""
-    return [n for n in REGISTRY if n != "poselib" or poselib_available()]
+    """Names of the registered methods usable here (PoseLib and SupeRANSAC only when
+    installed)."""
+    return [n for n in REGISTRY if _usable(n)]
 
 
 def resolve_methods(spec: str) -> list[Method]:
@@ -198,8 +280,9 @@ def resolve_methods(spec: str) -> list[Method]:
         elif token in ("ours", "opencv"):
             names += [n for n in available_methods() if REGISTRY[n].family == token]
         elif token in REGISTRY:
-            if token == "poselib" and not poselib_available():
-                raise ValueError("method 'poselib' needs PoseLib: pip install 'sepfm_ros[poselib]'")
+            if not _usable(token):
+                needs = _OPTIONAL[REGISTRY[token].family][1]
+                raise ValueError(f"method {token!r} needs {needs}")
             names.append(token)
         else:
             raise ValueError(

@@ -11,6 +11,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_ablation  # noqa: E402
 import bench_docs  # noqa: E402
 
+from sepfm_ros.evaluation.methods import superansac_methods  # noqa: E402
 from sepfm_ros.geometry import DEFAULT_METHOD  # noqa: E402
 
 
@@ -23,6 +24,7 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
     assert "(2 pairs: every 100th of pairs.json; seed 0)" in out
     labels = [f"{DEFAULT_METHOD} (default)"] + [k for k in bench_ablation.CONFIGS if k != "default"]
     labels += bench_ablation.ANCHORS
+    assert set(superansac_methods()) <= set(bench_ablation.ANCHORS)  # where installed
     for label in labels:
         row = re.search(rf"^\| {re.escape(label)} \| (\S+) \| (\S+) \| (\S+) \| (\S+) \| (\S+) "
                         r"\| ([^|]+) \|$", out, re.M)  # fmt: skip
@@ -30,6 +32,8 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
         f, success = float(row.group(1)), float(row.group(2))
         assert 0.0 <= f <= 1.0 and 0.0 <= success <= 100.0
         assert float(row.group(4)) > 0
+        if label.startswith("superansac"):  # its returned iterations
+            assert int(row.group(3)) > 0
         lines = re.fullmatch(r"(\d+\.\d\d) \((\d+)%\)", row.group(6))
         if label.startswith(DEFAULT_METHOD):  # the line search's cost per pair and its share
             assert lines and float(lines.group(1)) > 0 and 0 < int(lines.group(2)) <= 100, row[0]

@@ -14,14 +14,18 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_docs  # noqa: E402
 import bench_lines  # noqa: E402
 
+from sepfm_ros.evaluation.methods import superansac_methods  # noqa: E402
+
 PAPER_TEX = Path(__file__).resolve().parents[3] / "shared" / "paper" / "separable_four_points_F.tex"
 
 
 def test_two_pairs_two_methods_print_and_write_docs(shared_data_lines, tmp_path, capsys):
     doc, eval_doc = tmp_path / "benchmarks.md", tmp_path / "eval" / "strecha.md"
     default = bench_lines.default_method()  # whatever estimate_fundamental defaults to now
+    extra = superansac_methods()  # where installed (test_superansac.py: required by CI)
     argv = ["--manifest", str(shared_data_lines / "pairs.json"), "--max-pairs", "2",
-            "--methods", f"{default},cv-magsac", "--write-docs", "--doc", str(doc),
+            "--methods", ",".join([default, "cv-magsac", *extra]),
+            "--write-docs", "--doc", str(doc),
             "--eval-doc", str(eval_doc)]  # fmt: skip
     assert bench_lines.main(argv) == 0
     out = capsys.readouterr().out
@@ -39,6 +43,13 @@ def test_two_pairs_two_methods_print_and_write_docs(shared_data_lines, tmp_path,
     assert out.count("Mean F-score per baseline") == 3
     assert f"median ms / cv-magsac's (same run): {default}" in out
     assert f"default method ({default}) F-score minus cv-accurate's: n/a (not run)" in out
+    for name in extra:  # a row per setting, its hypotheses, the default's F-score against it
+        found = re.findall(rf"^\| {re.escape(name)} \| (\d\.\d{{3}}) ± \d\.\d{{3}} \|"
+                           r".* \| (\d+) \| \S+ \|$", out, re.M)  # fmt: skip
+        assert len(found) == 3 and all(0.0 <= float(f) <= 1.0 and int(h) > 0 for f, h in found)
+        diffs = re.findall(rf"default method \({default}\) F-score .*minus {name}'s: [+-]\d", out)
+        assert len(diffs) == 3, name
+        assert out.count(f", {name} ") + out.count(f", {name}\n") >= 3, name
     # positives are the matches within 1 px of the GT F at any threshold: the 3 px run at SIFT
     # 0.75 reports the same outlier rate as the 1 px run on the same matches
     rates = re.findall(r"runs; outlier rate .*?: median (\S+), mean (\S+);", out)

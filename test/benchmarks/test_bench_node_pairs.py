@@ -15,6 +15,7 @@ import bench_docs  # noqa: E402
 import bench_node_pairs  # noqa: E402
 import bench_race_lines  # noqa: E402
 
+from sepfm_ros.evaluation.methods import superansac_methods  # noqa: E402
 from sepfm_ros.geometry import DEFAULT_METHOD  # noqa: E402
 from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig  # noqa: E402
 
@@ -39,7 +40,9 @@ def test_pairs_are_consecutive_frames_matched_by_the_node_pipeline(shared_data):
 def test_two_pairs_per_sequence_print_and_write_docs(shared_data, tmp_path, capsys):
     doc = tmp_path / "benchmarks.md"
     doc.write_text(bench_docs.empty_document())
-    methods = f"{DEFAULT_METHOD},cv-magsac"
+    # SupeRANSAC's two entries too where it is installed (test_superansac.py: required by CI)
+    names = [DEFAULT_METHOD, "cv-magsac", *superansac_methods()]
+    methods = ",".join(names)
     argv = ["--data", str(shared_data), "--max-pairs", "2", "--seeds", "0", "--methods", methods,
             "--write-docs", "--doc", str(doc)]  # fmt: skip
     assert bench_node_pairs.main(argv) == 0
@@ -51,13 +54,15 @@ def test_two_pairs_per_sequence_print_and_write_docs(shared_data, tmp_path, caps
         out,
         re.M,
     )
-    assert [r[0] for r in rows] == [DEFAULT_METHOD, "cv-magsac"] * 2
+    assert [r[0] for r in rows] == names * 2
     for name, f, ok, below, rot, dir_med, dir_p90, hyp, ms, ratio in rows:
         assert 0.0 <= float(f) <= 1.0
         # a small forward step: the pose from a good F is within a few degrees of the cameras'
-        assert 0.0 <= float(rot) < 2.0
         assert 0.0 <= float(dir_med) <= float(dir_p90) <= 180.0
-        assert float(dir_med) < 20.0
+        if not name.startswith("superansac"):
+            # SupeRANSAC's answers are what the benchmark reports, not what this test checks: on
+            # KITTI 49->50 it returns a wrong F (translation 151 degrees off) at 1 px
+            assert float(rot) < 2.0 and float(dir_med) < 20.0
         assert 0.0 <= float(ok) <= float(below) <= 100.0
         assert float(ms) > 0
         assert (hyp == "n/a") == (name == "cv-magsac")

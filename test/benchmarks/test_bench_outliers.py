@@ -12,6 +12,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_docs  # noqa: E402
 import bench_outliers  # noqa: E402
 
+from sepfm_ros.evaluation.methods import superansac_methods  # noqa: E402
 from sepfm_ros.geometry import DEFAULT_METHOD  # noqa: E402
 
 
@@ -23,6 +24,7 @@ def test_two_pairs_every_method_and_anchor_printed_and_written(shared_data, tmp_
     out = capsys.readouterr().out
     assert "(2 pairs, SIFT 0.8 + random wrong matches)" in out
     assert {"cv-ransac", "cv-magsac", "cv-accurate"} <= set(bench_outliers.ANCHORS)
+    assert set(superansac_methods()) <= set(bench_outliers.ANCHORS)  # where installed
     for name in (*bench_outliers.METHODS, *bench_outliers.ANCHORS):
         label = f"{name} (default)" if name == DEFAULT_METHOD else name
         row = re.search(

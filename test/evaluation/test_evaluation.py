@@ -303,7 +303,7 @@ def test_a_method_that_raises_is_a_failed_run_not_a_crash():
 def test_registry_holds_every_method_of_the_issue():
     expected = {"sep4", "sep5", "sep4-lmeds", "sep5-lmeds", "ransac7", "ransac8", "lmeds7",
                 "lmeds8", "cv-ransac", "cv-lmeds", "cv-magsac", "cv-accurate",
-                "poselib"}  # fmt: skip
+                "poselib", "superansac", "superansac-adaptive"}  # fmt: skip
     assert set(REGISTRY) == expected
 
 

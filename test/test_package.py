@@ -88,6 +88,7 @@ JAZZY_PACKAGES = {
     "rclpy",
     "builtin_interfaces",
     "rcl_interfaces",
+    "lifecycle_msgs",
     "rosgraph_msgs",
     "sensor_msgs",
     "std_msgs",

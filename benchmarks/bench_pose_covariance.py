@@ -29,6 +29,7 @@ from scipy.stats import chi2
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_docs  # noqa: E402
+from bench_pose import pair_sets  # noqa: E402  (the same pairs as the pose benchmark)
 
 from sepfm_ros.geometry.calibrated.pose import (  # noqa: E402
     pose_from_projections,
@@ -47,17 +48,6 @@ from sepfm_ros.pipeline.pipeline import Pipeline, PipelineConfig  # noqa: E402
 DATA = bench_docs.REPO.parent / "shared" / "data"
 CHI2_ROT, CHI2_DIR = chi2.ppf(0.95, 3), chi2.ppf(0.95, 2)
 TARGET_COVERED, TARGET_RATIO = 0.90, 3.0
-
-
-def pair_sets(cams: dict) -> dict[str, list[tuple[str, str]]]:
-    left = sorted(k for k in cams if k.startswith("kitti_seq2/left/"))
-    temple = sorted(k for k in cams if k.startswith("templeRing/"))
-    sets = {
-        f"KITTI, {g} apart": [(left[i], left[i + g]) for i in range(len(left) - g)]
-        for g in (1, 2, 4)
-    }
-    sets["templeRing, consecutive"] = [(temple[i], temple[i + 1]) for i in range(len(temple) - 1)]
-    return sets
 
 
 def evaluate_pair(pipe: Pipeline, cams: dict, a: str, b: str) -> dict | None:

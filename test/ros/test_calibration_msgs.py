@@ -18,6 +18,7 @@ from sepfm_ros.ros.msgs.calibration import (
     calibration_check_statuses,
     calibration_error_status,
     calibration_status,
+    camera_info_from_model,
     camera_model_from_info,
     relative_transform,
 )
@@ -41,6 +42,32 @@ def test_camera_info_to_model():
     assert m.size == (1241, 376)
     np.testing.assert_allclose(m.K, np.reshape(K, (3, 3)))
     assert m.P[0, 3] == pytest.approx(-386.1448)
+
+
+@pytest.mark.parametrize(
+    ("kw", "d_count"),
+    [
+        (dict(), 5),
+        (dict(d=[-0.3, 0.1, 0.001, -0.002, 0.0]), 5),
+        (dict(distortion_model="equidistant", d=[0.1, -0.02, 0.003, 0.0]), 4),
+        (dict(distortion_model="", d=[]), 5),  # no distortion: written as plumb_bob zeros
+    ],
+)
+def test_camera_info_from_model_round_trip(kw, d_count):
+    rotated = Rotation.from_euler("x", 0.5, degrees=True).as_matrix()
+    model = camera_model_from_info(_info(**kw, r=list(rotated.ravel())), image_size=(1241, 376))
+    hdr = Header(frame_id="right_camera_optical_frame")
+    hdr.stamp.sec, hdr.stamp.nanosec = 17, 250
+    msg = camera_info_from_model(model, hdr)
+    assert (msg.header.stamp.sec, msg.header.stamp.nanosec) == (17, 250)
+    assert msg.header.frame_id == "right_camera_optical_frame"
+    assert (msg.width, msg.height) == (1241, 376) and len(msg.d) == d_count
+    back = camera_model_from_info(msg, image_size=(1241, 376))
+    assert back.distortion_model == model.distortion_model
+    for field in ("K", "R", "P"):
+        np.testing.assert_allclose(getattr(back, field), getattr(model, field), atol=1e-12)
+    np.testing.assert_allclose(back.D[: model.D.size], model.D)
+    assert not np.any(back.D[model.D.size :])
 
 
 @pytest.mark.parametrize(

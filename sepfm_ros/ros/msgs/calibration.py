@@ -2,7 +2,8 @@
 
 - :func:`camera_model_from_info`: ``sensor_msgs/CameraInfo`` (rclpy or rosbags message) ->
   validated :class:`~sepfm_ros.geometry.calibrated.camera.CameraModel` (CalibrationError with
-  the reason).
+  the reason); :func:`camera_info_from_model` the reverse (a model -> ``CameraInfo`` under a
+  given header), for the corrected calibration the node publishes and sends to a driver.
 - :func:`relative_transform`: a relative pose -> ``geometry_msgs/TransformStamped`` of camera b
   in camera a's optical frame (header = a's frame and the pair's stamp, child = b's frame).
 - :func:`relative_pose_message`: the same pose with its covariance ->
@@ -74,6 +75,30 @@ def camera_model_from_info(msg: Any, image_size: tuple[int, int] | None = None) 
     return camera_model(
         msg.k, msg.d, msg.distortion_model, msg.r, msg.p, msg.width, msg.height, image_size
     )
+
+
+#: zero distortion coefficients written for a model without any, per distortion model (the
+#: counts image_geometry and camera_calibration_parsers expect)
+ZERO_DISTORTION = {"plumb_bob": 5, "rational_polynomial": 8, "equidistant": 4}
+
+
+def camera_info_from_model(model: CameraModel, header: Header) -> Any:
+    """A ``sensor_msgs/CameraInfo`` of ``model`` under ``header`` (copied): width, height,
+    distortion_model, d (zeros of the model's usual count when it has none), k, r, p row-major;
+    no binning, no region of interest. :func:`camera_model_from_info` of it gives ``model``
+    back."""
+    from sensor_msgs.msg import CameraInfo
+
+    D = np.asarray(model.D, np.float64).reshape(-1)
+    if D.size == 0:
+        D = np.zeros(ZERO_DISTORTION.get(model.distortion_model, 5))
+    msg = CameraInfo(header=copy_header(header), width=int(model.width), height=int(model.height))
+    msg.distortion_model = model.distortion_model
+    msg.d = [float(v) for v in D]
+    msg.k = [float(v) for v in np.asarray(model.K, np.float64).reshape(-1)]
+    msg.r = [float(v) for v in np.asarray(model.R, np.float64).reshape(-1)]
+    msg.p = [float(v) for v in np.asarray(model.P, np.float64).reshape(-1)]
+    return msg
 
 
 def relative_transform(

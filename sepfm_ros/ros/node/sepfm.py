@@ -39,6 +39,7 @@ from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, stat
 from sepfm_ros.ros.msgs.headers import copy_header, stamp_ns
 from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.node.camera_info import CameraInfoInputs, calibration_in_use_text
+from sepfm_ros.ros.node.corrected import CorrectedStereo
 from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
 from sepfm_ros.ros.node.jobs import Job, MatchedJob
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
@@ -53,7 +54,7 @@ from sepfm_ros.ros.node.lifecycle import (
 )
 from sepfm_ros.ros.node.memory import release_free_memory
 from sepfm_ros.ros.node.outputs import RELIABLE, NodeOutputs
-from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic
+from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic, subscription_values
 from sepfm_ros.ros.session.answer import (
     BadInput,
     PairAnswer,
@@ -149,6 +150,8 @@ class SepfmNode(ManagedNode):
         self._pairing = self._session.pairing()
         self._scheduler = PairScheduler()
         self._out = NodeOutputs(self, self._diagnostics)
+        publish, apply = (self._mode == "stereo" and values[k] for k in CorrectedStereo.PARAMS)
+        self._corrected = CorrectedStereo(self, self._bases, publish, apply, self._log)
         self._calib_status = None
         self._workers = [
             threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
@@ -175,10 +178,12 @@ class SepfmNode(ManagedNode):
         """Stop the workers and destroy the outputs."""
         self.shutdown()
         self._out.destroy()
+        self._corrected.destroy()
 
     def _wanted(self) -> bool:
-        """Whether the node should hold its inputs: ``always_on``, or an answer subscriber."""
-        return self._always_on or self._out.demand() > 0
+        """Whether the node should hold its inputs: ``always_on``, or an answer subscriber
+        (the corrected topics' among them)."""
+        return self._always_on or self._out.demand() + self._corrected.demand() > 0
 
     def _subscribe(self) -> None:
         """Demand came: subscribe to the inputs with fresh pairing (no pair of older frames)."""
@@ -380,6 +385,7 @@ class SepfmNode(ManagedNode):
         header = copy_header(left.header)
         job = Job(left, right, max(t_left, t_right), header, (run, "l", ns_l), (run, "r", ns_r))
         self._offer(job)
+        self._corrected.pair_formed([left, right])  # while a correction is in force
 
     @guarded
     def _on_motion(self, msg: Any) -> None:
@@ -512,6 +518,7 @@ class SepfmNode(ManagedNode):
         latency_ms = (time.monotonic() - job.received) * 1e3
         add_timings(answer.estimate, {"latency": latency_ms})
         self._out.answer(answer, item.images, self._epipolar_lines)
+        self._corrected.update(self._session.calibrated.calibration, [job.msg_a, job.msg_b])
         ok = answer.result is not None and answer.result.ok
         self._health.answered(latency_ms, item.wait_ms, answer.has_f, ok)
 
@@ -520,26 +527,16 @@ class SepfmNode(ManagedNode):
         """The values of the /diagnostics report (rates over the last period)."""
         values = self._health.values()
         values.update(self._scheduler.snapshot())
-        # publishers matched by the input subscriptions (the fewest over the inputs): a player
-        # can wait for this before sending, since a message sent before matching is lost
-        values["input_publishers"] = min((s.publisher_count() for s in self._subs), default=0)
-        for k, name in enumerate(self._health.topics):
-            sub = self._subs[k] if self._subs else None
-            values[f"input_reliability_{name}"] = (
-                "idle" if sub is None else sub.reliability or "waiting for publishers"
-            )
-        # input_reliability auto: subscriptions recreated for a change of the publishers, by kind
         with self._lock:
             switches = dict(self._qos_switches)
-        values["input_qos_switches"] = sum(switches.values())
-        for kind in ("best_effort", "reliable"):
-            values[f"input_qos_switches_to_{kind}"] = switches.get(kind, 0)
+        values.update(subscription_values(self._subs, self._health.topics, switches))
         values["dds_input_transport"] = self._dds.describe()
         if self._camera_info is not None:
             values.update(self._camera_info.diagnostic_values())
         # subscribers matched by the result publishers (the fewest over estimate and matches) and by
         # ~/debug_image (drawn on the estimate thread, after the answer, only for these)
         values.update(self._out.subscribers())
+        values.update(self._corrected.diagnostic_values())
         # motion mode: each frame detected once (its features are cached by stamp)
         values["images_detected"] = self._session.pipeline.images_detected
         values["images_features_cached"] = self._session.pipeline.images_cached

@@ -232,6 +232,29 @@ class InputSubscription:
         return 0 if self.subscription is None else self.subscription.get_publisher_count()
 
 
+def subscription_values(
+    subs: list[InputSubscription], topics: list[str], switches: dict[str, int]
+) -> dict[str, Any]:
+    """The /diagnostics values of a node's input subscriptions ``subs`` (one per input named in
+    ``topics``; none while idle): ``input_publishers``, the publishers matched (the fewest over
+    the inputs: a player can wait for it before sending, since a message sent before matching
+    is lost); ``input_reliability_<input>``; and ``switches`` (input_reliability auto: the
+    subscriptions recreated for a change of the publishers, by the new reliability) in all and
+    by kind."""
+    values: dict[str, Any] = {
+        "input_publishers": min((s.publisher_count() for s in subs), default=0)
+    }
+    for k, name in enumerate(topics):
+        sub = subs[k] if subs else None
+        values[f"input_reliability_{name}"] = (
+            "idle" if sub is None else sub.reliability or "waiting for publishers"
+        )
+    values["input_qos_switches"] = sum(switches.values())
+    for kind in ("best_effort", "reliable"):
+        values[f"input_qos_switches_to_{kind}"] = switches.get(kind, 0)
+    return values
+
+
 def _reliability_name(policy: ReliabilityPolicy) -> str:
     return "reliable" if policy == ReliabilityPolicy.RELIABLE else "best_effort"
 

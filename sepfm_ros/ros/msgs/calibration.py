@@ -13,7 +13,7 @@
   (``geometry_msgs/TwistWithCovarianceStamped``, ``~/angular_velocity``) and the unit direction
   of its motion (``geometry_msgs/Vector3Stamped``, ``~/translation_direction``);
 - :func:`calibration_status`: the stereo check's decision -> ``diagnostic_msgs/DiagnosticStatus``
-  named ``<node FQN>: calibration``.
+  named ``<node FQN>: calibration``, with the correction's state (:func:`correction_values`).
 - :func:`calibration_check_message`: that status stamped with its pair's header, as the
   ``diagnostic_msgs/DiagnosticArray`` of ``~/calibration_check``.
 - :func:`calibration_check_statuses`: the statuses of a ``~/calibration_check`` message of either
@@ -45,6 +45,7 @@ from std_msgs.msg import Header
 
 from sepfm_ros.geometry.calibrated.calibration_check import CalibrationStatus
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel, camera_model
+from sepfm_ros.geometry.calibrated.correction import CorrectionResult
 from sepfm_ros.geometry.calibrated.pose import RelativePose, pose_of_b_in_a
 from sepfm_ros.geometry.calibrated.pose_covariance import pose_in_a_covariance
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, status_name
@@ -198,15 +199,50 @@ def translation_direction_message(pose: RelativePose, header: Header, frame: str
     )
 
 
+AXES = ("pitch", "yaw", "roll")  # the correction's rotation vector components in b's optical axes
+
+
+def correction_values(result: CorrectionResult | None) -> dict[str, Any]:
+    """The correction's state as diagnostic values: ``correction`` (one line: the per-axis
+    correction with its 95 % interval and the pairs used, or ``none: <why>``); with a
+    correction also ``correction_<axis>_deg`` and ``correction_<axis>_interval_deg`` for
+    pitch, yaw and roll (yaw's is the free fit's when yaw is kept), ``correction_yaw_corrected``
+    and ``correction_pairs``. Empty for None (no rig)."""
+    if result is None:
+        return {}
+    fix = result.correction
+    if fix is None:
+        return {"correction": f"none: {result.reason}"}
+    parts = []
+    values: dict[str, Any] = {}
+    for k, axis in enumerate(AXES):
+        value = float(fix.axes_deg[k])
+        if axis == "yaw" and not fix.yaw_determined:
+            value = float(fix.yaw_estimate_deg)
+            parts.append(f"yaw kept ({value:+.3f} ± {fix.interval_deg[k]:.3f})")
+        else:
+            parts.append(f"{axis} {value:+.3f} ± {fix.interval_deg[k]:.3f}")
+        values[f"correction_{axis}_deg"] = round(value, 4)
+        values[f"correction_{axis}_interval_deg"] = round(float(fix.interval_deg[k]), 4)
+    values["correction_yaw_corrected"] = int(fix.yaw_determined)
+    values["correction_pairs"] = fix.n_pairs
+    text = ", ".join(parts) + f" deg (95 %) from {fix.n_pairs} pairs"
+    return {"correction": text, **values}
+
+
 def calibration_status(
-    status: CalibrationStatus, node_fqn: str, hardware_id: str = ""
+    status: CalibrationStatus,
+    node_fqn: str,
+    hardware_id: str = "",
+    correction: CorrectionResult | None = None,
 ) -> DiagnosticStatus:
-    """The stereo calibration check as ``DiagnosticStatus`` named ``<node FQN>: calibration``."""
+    """The stereo calibration check as ``DiagnosticStatus`` named ``<node FQN>: calibration``,
+    with the ``correction``'s state after the same pair (:func:`correction_values`)."""
     return health_status(
         status_name(node_fqn, CALIBRATION_TASK),
         bytes([status.level]),
         status.message,
-        status.values,
+        {**status.values, **correction_values(correction)},
         hardware_id,
     )
 

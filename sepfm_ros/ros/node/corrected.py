@@ -46,7 +46,6 @@ from std_msgs.msg import Header
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
 from sepfm_ros.pipeline.calibration import StreamCalibration
 from sepfm_ros.ros.msgs.calibration import camera_info_from_model
-from sepfm_ros.ros.msgs.headers import copy_header
 from sepfm_ros.ros.node.camera_info import node_camera_info_topic
 from sepfm_ros.ros.node.keep_serving import ThrottledLog
 from sepfm_ros.ros.node.lifecycle import state_name
@@ -81,6 +80,29 @@ def corrected_infos(models: tuple[CameraModel, CameraModel], headers: list[Heade
     return [camera_info_from_model(m, h) for m, h in zip(models, headers, strict=True)]
 
 
+def driver_models(
+    corrected: tuple[CameraModel, CameraModel],
+    received: tuple[CameraModel, CameraModel],
+    rectified: bool,
+) -> tuple[CameraModel, CameraModel]:
+    """The calibration each driver should store for a correction.
+
+    Raw input: the corrected models themselves. Rectified input (``image_rect``, whose
+    camera_info is the driver's raw calibration, as image_proc publishes them): the corrected
+    models describe the rectified images (K = the stale P's, R from the stale-rectified frame
+    to the corrected one), so the driver's raw camera gets its own K and D with
+    R = R_corrected R_received (raw frame -> stale-rectified -> corrected-rectified) and the
+    corrected P.
+    """
+    if not rectified:
+        return corrected
+    a, b = (
+        CameraModel(r.K, r.D, r.distortion_model, c.R @ r.R, c.P, r.width, r.height)
+        for c, r in zip(corrected, received, strict=True)
+    )
+    return a, b
+
+
 class CorrectedTopics:
     """The ``~/corrected/<side>/image_raw`` and ``.../camera_info`` lifecycle publishers of a
     stereo node (created at configure: ``publish_corrected`` is read-only; they publish while
@@ -104,9 +126,9 @@ class CorrectedTopics:
         """Publish the pair's images ``msgs`` (left, right) again, each with the corrected
         camera_info under the image's own header (camera_info first, as drivers do)."""
         infos = corrected_infos(models, [m.header for m in msgs])
-        for pubs, msg, info in zip(zip(self.images, self.infos), msgs, infos, strict=True):
-            pubs[1].publish(info)
-            pubs[0].publish(msg)
+        for k, (msg, info) in enumerate(zip(msgs, infos, strict=True)):
+            self.infos[k].publish(info)
+            self.images[k].publish(msg)
         self.pairs_published += 1
 
     def destroy(self) -> None:
@@ -224,7 +246,9 @@ class CorrectionSender:
     def diagnostic_values(self) -> dict[str, Any]:
         """Per service: successful and failed calls and the last result; in all, failures."""
         with self._lock:
-            values: dict[str, Any] = {"set_camera_info_failures": sum(s.failures for s in self._sides)}
+            values: dict[str, Any] = {
+                "set_camera_info_failures": sum(s.failures for s in self._sides)
+            }
             for side in self._sides:
                 values[f"set_camera_info {side.service}"] = (
                     f"{side.successes} stored, {side.failures} failed; last: {side.last_result}"
@@ -272,13 +296,16 @@ class CorrectedStereo:
         except (CalibrationError, ValueError, np.linalg.LinAlgError) as err:
             models = None
             self._log.log("correction_unusable", f"no corrected camera_info: {err}")
-        headers = [m.header for m in images]
+        received = calibration._models  # the camera_info models as received
         with self._lock:
             if models is not None and self._models is None:
                 self.generation += 1
             self._models = models
             if self.sender is not None:
-                infos = None if models is None else corrected_infos(models, headers)
+                infos = None
+                if models is not None and received is not None:
+                    stored = driver_models(models, received, calibration.rectified)
+                    infos = corrected_infos(stored, [m.header for m in images])
                 self.sender.offer(self.generation, infos)
 
     def pair_formed(self, msgs: list[Any]) -> None:

@@ -152,5 +152,7 @@ class CalibratedStream:
             out.angular_velocity = angular_velocity_message(pose, header, frames[0], dt_s)
             out.translation_direction = translation_direction_message(pose, header, frames[0])
         if outputs.status is not None:
-            out.status = calibration_status(outputs.status, self.node_fqn, self.hardware_id)
+            out.status = calibration_status(
+                outputs.status, self.node_fqn, self.hardware_id, outputs.correction
+            )
         return out

@@ -517,8 +517,9 @@ class SepfmNode(ManagedNode):
                 self._calib_status = answer.calibration
         latency_ms = (time.monotonic() - job.received) * 1e3
         add_timings(answer.estimate, {"latency": latency_ms})
-        self._out.answer(answer, item.images, self._epipolar_lines)
+        # the correction in force from this pair on (before its answer, which announces it)
         self._corrected.update(self._session.calibrated.calibration, [job.msg_a, job.msg_b])
+        self._out.answer(answer, item.images, self._epipolar_lines)
         ok = answer.result is not None and answer.result.ok
         self._health.answered(latency_ms, item.wait_ms, answer.has_f, ok)
 

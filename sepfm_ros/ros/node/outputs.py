@@ -11,7 +11,8 @@ either topic.
 The answer publishers are lifecycle publishers: they publish only while the node is active.
 :attr:`NodeOutputs.demand_publishers` lists the outputs whose subscribers are demand (the node
 holds its image subscriptions only while one of them has a subscriber, unless ``always_on``):
-a publisher added to that list counts. ``/diagnostics`` and ``~/calibration_check`` never
+a publisher added to that list counts, and so do the corrected topics
+(:mod:`~sepfm_ros.ros.node.corrected`). ``/diagnostics`` and ``~/calibration_check`` never
 count."""
 
 from __future__ import annotations

@@ -202,6 +202,7 @@ class CorrectionSender:
         side, client = self._sides[k], self._clients[k]
         with self._lock:
             if side.pending is not None:  # the last call had no answer in time
+                client.remove_pending_request(side.pending)
                 side.pending.cancel()
                 side.pending = None
                 self._fail(side, f"no answer within {APPLY_TIMEOUT_S:.0f} s")
@@ -220,17 +221,16 @@ class CorrectionSender:
         if future.cancelled():
             return
         response = future.result()
+        stored = response is not None and bool(response.success)
         with self._lock:
             side.pending = None
-            if response is not None and response.success:
+            if stored:
                 side.applied, side.successes = generation, side.successes + 1
                 side.last_result = "stored"
-                text = None
             else:
                 message = "" if response is None else response.status_message
                 self._fail(side, f"refused: {message or 'no reason given'}")
-                text = side.last_result
-        if text is None:
+        if stored:
             self._node.get_logger().info(f"{side.service}: the driver stored the correction")
 
     def _fail(self, side: _SideState, reason: str) -> None:

@@ -33,12 +33,15 @@ from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState  # noqa: E402
 from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
-from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image  # noqa: E402
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 
 from sepfm_ros.ros.bags.synthesis import camera_info_message, camera_infos  # noqa: E402
 from sepfm_ros.ros.msgs.diagnostics import status_values  # noqa: E402
 from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
+from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
+
+pytestmark = pytest.mark.slow  # four nodes, each fed 15-20 KITTI pairs: about 4 minutes
 
 SIZE = (1241, 376)
 N_FRAMES = 51  # kitti_seq2's stereo frames
@@ -52,7 +55,7 @@ class KnockedRig:
     """KITTI stereo pairs with the right image turned by KNOCK, published with the stale
     camera_info under ``ns``; the images sent, by stamp."""
 
-    def __init__(self, client, shared_data, ns: str, t0: int) -> None:
+    def __init__(self, client, shared_data, ns: str, t0: int, compressed: bool = False) -> None:
         cams = json.loads((shared_data / "cameras.json").read_text())
         self.paths = [
             (
@@ -66,7 +69,8 @@ class KnockedRig:
         self.calibs = camera_infos(P, SIZE)
         K_r = self.calibs[1].K
         self.warp = K_r @ KNOCK @ np.linalg.inv(K_r)
-        self.client, self.ns, self.t0 = client, ns, t0
+        self.client, self.ns, self.t0, self.compressed = client, ns, t0, compressed
+        self.messages: dict[int, list] = {}  # the image messages sent, by stamp
         self.sent: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self.stale = [
             camera_info_message(c, SIZE, header(0, f"{s}_optical"))
@@ -85,19 +89,26 @@ class KnockedRig:
             info = camera_info_message(calib, SIZE, header(stamp, f"{side}_optical"))
             self.client.publish(f"{side}_info", info)
         time.sleep(0.02)
+        self.messages[stamp] = []
         for side, img in zip(SIDES, (left, right), strict=True):
-            msg = image_msg(img, stamp)
-            msg.header.frame_id = f"{side}_optical"
+            if self.compressed:
+                msg = numpy_to_compressed(img, "png", header(stamp, f"{side}_optical"))
+            else:
+                msg = image_msg(img, stamp)
+                msg.header.frame_id = f"{side}_optical"
             self.client.publish(side, msg)
+            self.messages[stamp].append(msg)
         self.sent[stamp] = (left, right)
         return stamp
 
 
-def inputs(ns: str) -> dict[str, tuple[str, type]]:
-    """The test client's publishers: the images and camera_info of both cameras under ``ns``."""
+def inputs(ns: str, compressed: bool = False) -> dict[str, tuple[str, type]]:
+    """The test client's publishers: the images (raw, or image_transport's compressed) and
+    camera_info of both cameras under ``ns``."""
+    suffix, image_type = ("/compressed", CompressedImage) if compressed else ("", Image)
     return {
-        "left": (f"{ns}/left/image_raw", Image),
-        "right": (f"{ns}/right/image_raw", Image),
+        "left": (f"{ns}/left/image_raw{suffix}", image_type),
+        "right": (f"{ns}/right/image_raw{suffix}", image_type),
         "left_info": (f"{ns}/left/camera_info", CameraInfo),
         "right_info": (f"{ns}/right/camera_info", CameraInfo),
     }
@@ -119,14 +130,19 @@ class Listener:
     """The node's ~/corrected/<side>/{image_raw,camera_info} by stamp and its
     ~/calibration_check statuses' values by stamp."""
 
-    def __init__(self, ros, node: str) -> None:
+    def __init__(self, ros, node: str, compressed: bool = False) -> None:
         self.lock = threading.Lock()
         self.images: dict[str, dict[int, Image]] = {s: {} for s in SIDES}
         self.infos: dict[str, dict[int, CameraInfo]] = {s: {} for s in SIDES}
         self.checks: dict[int, dict[str, str]] = {}
         for side in SIDES:
-            for kind, store in (("image_raw", self.images), ("camera_info", self.infos)):
-                msg_type = Image if kind == "image_raw" else CameraInfo
+            image = (
+                ("image_raw/compressed", CompressedImage) if compressed else ("image_raw", Image)
+            )
+            for (kind, msg_type), store in (
+                (image, self.images),
+                (("camera_info", CameraInfo), self.infos),
+            ):
                 ros.node.create_subscription(
                     msg_type, f"/{node}/corrected/{side}/{kind}", self._keep(store[side]), RELIABLE
                 )
@@ -371,5 +387,36 @@ def test_defaults_publish_no_corrected_topics_and_call_no_driver(ros, tmp_path, 
         assert listener.count() == 0
         assert all(d.received == [] for d in drivers)
         assert "set_camera_info_failures" not in health
+    finally:
+        proc.stop()
+
+
+def test_compressed_input_comes_back_on_the_compressed_corrected_topic(ros, tmp_path, shared_data):
+    node, ns = "sepfm_heal_compressed", "/heal_compressed"
+    t0 = 1_700_500_000 * 10**9
+    args = node_args(ns, "publish_corrected:=true", "image_transport:=compressed")
+    proc, client = start_node(node, tmp_path, ros, inputs(ns, compressed=True), *args)
+    rig = KnockedRig(client, shared_data, ns, t0, compressed=True)
+    listener = Listener(ros, node, compressed=True)
+    time.sleep(0.5)
+    try:
+        n = send_until(rig, client, in_force(listener))
+        after = []
+        for k in range(n, n + 2):
+            after.append(rig.send(k))
+            client.wait_info(after[-1])
+        deadline = time.monotonic() + 10.0
+        while not set(after) <= listener.corrected_stamps() and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert sorted(listener.corrected_stamps()) == after
+        assert ros.node.count_publishers(f"/{node}/corrected/left/image_raw") == 0
+        with listener.lock:
+            for stamp in after:
+                for k, side in enumerate(SIDES):
+                    image, info = listener.images[side][stamp], listener.infos[side][stamp]
+                    sent = rig.messages[stamp][k]
+                    assert image.format == sent.format and bytes(image.data) == bytes(sent.data)
+                    assert stamp_ns(info.header.stamp) == stamp
+                    assert info.header.frame_id == image.header.frame_id == f"{side}_optical"
     finally:
         proc.stop()

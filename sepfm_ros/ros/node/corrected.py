@@ -39,7 +39,7 @@ from typing import Any
 import numpy as np
 from rclpy.lifecycle import LifecycleNode
 from rclpy.publisher import Publisher
-from sensor_msgs.msg import CameraInfo, Image
+from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_msgs.msg import Header
 
@@ -106,12 +106,17 @@ def driver_models(
 class CorrectedTopics:
     """The ``~/corrected/<side>/image_raw`` and ``.../camera_info`` lifecycle publishers of a
     stereo node (created at configure: ``publish_corrected`` is read-only; they publish while
-    the node is active)."""
+    the node is active). With ``image_transport:=compressed`` the images go out as received on
+    image_transport's compressed topic of that base, ``~/corrected/<side>/image_raw/compressed``
+    (a consumer subscribes with the compressed transport)."""
 
-    def __init__(self, node: LifecycleNode) -> None:
+    def __init__(self, node: LifecycleNode, transport: str = "raw") -> None:
         self._node = node
         make = node.create_lifecycle_publisher
-        self.images = [make(Image, corrected_topic(s, "image_raw"), RELIABLE) for s in SIDES]
+        kind, image_type = "image_raw", Image
+        if transport == "compressed":
+            kind, image_type = "image_raw/compressed", CompressedImage
+        self.images = [make(image_type, corrected_topic(s, kind), RELIABLE) for s in SIDES]
         self.infos = [make(CameraInfo, corrected_topic(s, "camera_info"), RELIABLE) for s in SIDES]
         self.pairs_published = 0
 
@@ -270,21 +275,25 @@ class CorrectedStereo:
     :meth:`pair_formed` (the executor, as each pair forms) republishes the pair with it.
     """
 
-    PARAMS = ("publish_corrected", "apply_correction")  #: the node parameters of the two
-
     def __init__(
         self,
         node: LifecycleNode,
         image_bases: list[str],
-        publish: bool,
-        apply: bool,
         log: ThrottledLog,
+        values: dict[str, Any],
+        transport: str = "raw",
     ) -> None:
+        """``image_bases``: the node's image inputs (two: stereo; one: motion, where there is
+        no correction and both are off); ``values``: the node's parameter values
+        (``publish_corrected``, ``apply_correction``); ``transport``: the input's."""
+        stereo = len(image_bases) == 2
+        publish = stereo and bool(values["publish_corrected"])
+        apply = stereo and bool(values["apply_correction"])
         self._lock = threading.Lock()
         self._log = log
         self._models: tuple[CameraModel, CameraModel] | None = None
         self.generation = 0  #: corrections that came into force
-        self.topics = CorrectedTopics(node) if publish else None
+        self.topics = CorrectedTopics(node, transport) if publish else None
         self.sender = CorrectionSender(node, image_bases, log) if apply else None
 
     def update(self, calibration: StreamCalibration, images: list[Any]) -> None:

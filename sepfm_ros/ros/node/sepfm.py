@@ -150,8 +150,7 @@ class SepfmNode(ManagedNode):
         self._pairing = self._session.pairing()
         self._scheduler = PairScheduler()
         self._out = NodeOutputs(self, self._diagnostics)
-        publish, apply = (self._mode == "stereo" and values[k] for k in CorrectedStereo.PARAMS)
-        self._corrected = CorrectedStereo(self, self._bases, publish, apply, self._log)
+        self._corrected = CorrectedStereo(self, self._bases, self._log, values, self._transport)
         self._calib_status = None
         self._workers = [
             threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),

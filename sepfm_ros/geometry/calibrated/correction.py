@@ -4,25 +4,29 @@ show. No ROS.
 Model. A knock, heat or a loose mount turns camera b about its own centre by a small rotation
 ``dR``: its centre stays where it was in the rig (camera a's frame), so the relative pose becomes
 ``R' = dR R``, ``t' = dR t`` (``X_b = R X_a + t``). Its essential matrix is ``dR E``: the
-correction acts on b's image alone, as the homography ``K_b dR K_b^-1``. (Keeping ``t`` fixed in
-b's frame instead, as the per-pair check of
+correction acts on b's image alone, as the homography ``K_b dR K_b^-1``, the warp that
+benchmarks inject. (Keeping ``t`` fixed in b's frame instead, as the per-pair check of
 :func:`~sepfm_ros.geometry.calibrated.calibration_check.check_pair` does, moves b's centre
-sideways by ``|t| * angle``: at finite depth this shifts the rows by ``angle * disparity`` and a
-fit of a roll reads about 15 % low on KITTI.)
+sideways by ``|t| * angle``; on KITTI both read the same within 0.005 deg.)
 
 Estimate (:func:`estimate_correction`):
 
 1. each pair of the window is fitted alone (3-dof Sampson fit, soft-L1 beyond
-   :attr:`CorrectionConfig.scale_px`); cached per pair;
-2. pairs whose observable rotation is far from the window's median (more than
-   :attr:`CorrectionConfig.outlier_sigma` robust deviations, MAD) are dropped as bad pairs;
-3. the kept pairs' matches are fitted together (3 dof); the 95 % interval per axis is Student's
-   t over the kept pairs' own fits: ``t_0.975(n-1) * std / sqrt(n)`` (matches of one pair are
-   correlated, pairs much less);
+   :attr:`CorrectionConfig.scale_px`), first on the check's matches, then twice on all its
+   matches within :attr:`CorrectionConfig.band_px` of its own fit; cached per pair;
+2. pairs whose observable rotation is far from the median of the newest
+   :attr:`CorrectionConfig.min_pairs` pairs (more than :attr:`CorrectionConfig.outlier_sigma`
+   robust deviations, MAD) are dropped as bad pairs, and so are the pairs from before a change
+   of the rig;
+3. the estimate is the mean of the kept pairs' fits; the 95 % interval per axis is Student's
+   t over them, ``t_0.975(n-1) * std / sqrt(n)`` (matches of one pair are correlated, pairs
+   much less), with a systematic floor :attr:`CorrectionConfig.systematic_px` in quadrature;
 4. yaw (the rotation about the axis normal to the baseline and b's optical axis) moves points
-   along the epipolar lines: a disparity bias, not an epipolar error. It is kept at the
-   calibrated value (the fit repeated with it fixed) unless its interval is narrower than
-   :attr:`CorrectionConfig.yaw_max_interval_deg` and excludes zero.
+   along the epipolar lines: a disparity bias, not an epipolar error; only the second-order
+   row shift ``angle * (u - cx)(v - cy) / f`` shows it, which a residual distortion or a
+   rectification error of a tenth of a pixel mimics. It is fitted with the other two (fixing it
+   at zero while the matches show one would bias roll) and applied only when its interval is
+   narrower than :attr:`CorrectionConfig.yaw_max_interval_deg` and excludes zero.
 
 No correction (``CorrectionResult.correction is None``, with the reason) from fewer than
 :attr:`CorrectionConfig.min_pairs` pairs, from matches that cover too little of the image, from
@@ -332,6 +336,15 @@ def _pair_fit(calib: StereoCalibration, pair: _Pair, config: CorrectionConfig) -
     return fit
 
 
+def pair_rotations(
+    calib: StereoCalibration, window: CorrectionWindow, config: CorrectionConfig
+) -> np.ndarray:
+    """(n, 3) each pair's own rotation vector of camera b (rad, b's frame), as
+    :func:`estimate_correction` fits them (yaw included): their mean is a window's rotation
+    without the decisions of :func:`estimate_correction` (e.g. a clean sequence's reading)."""
+    return np.array([_pair_fit(calib, p, config).free for p in window.pairs]).reshape(-1, 3)
+
+
 def _coverage(calib: StereoCalibration, pts_b: np.ndarray) -> float:
     """Smaller of the matches' robust extents in b's image (5-95th percentile) over its size."""
     lo, hi = np.percentile(pts_b, [5, 95], axis=0)
@@ -375,7 +388,9 @@ def estimate_correction(
     pair_fits = [_pair_fit(calib, p, config) for p in pairs]
     free = np.array([f.free for f in pair_fits])  # (n, 3) rad
     obs = _observable(free, weak)
-    dev = np.linalg.norm(obs - np.median(obs, axis=0), axis=1)
+    # the reference is the newest min_pairs pairs' median: pairs from before a change of the
+    # rig are dropped like bad pairs, and the correction follows the rig as it is now
+    dev = np.linalg.norm(obs - np.median(obs[-config.min_pairs :], axis=0), axis=1)
     mad = 1.4826 * float(np.median(dev))
     keep = dev <= config.outlier_sigma * max(mad, np.radians(config.outlier_floor_deg))
     n = int(np.count_nonzero(keep))

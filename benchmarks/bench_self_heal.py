@@ -16,10 +16,10 @@ calibration check; windows of N = 10, 20 and 40 consecutive pairs after the chan
 give :func:`~sepfm_ros.geometry.calibrated.correction.estimate_correction`. Reported: the error
 per axis against the truth, the interval's coverage and median half-width, the median vertical
 disparity of ground-truth matches (the clean pair's matches within 1 px of the calibration,
-moved by the knock's homography) and OpenCV StereoSGBM's share of valid disparities after
-rectification with the stale, the corrected (N = 20) and the true calibration, and corrections
-issued on the clean sequences (by the estimator alone on every window, and gated by the
-monitor as the node runs it).
+moved by the knock's homography; synthetic: a grid of pixels cast onto the scene) and
+OpenCV StereoSGBM's share of valid disparities after rectification with the stale, the
+corrected (N = 20) and the true calibration, and corrections issued on the clean sequences
+(by the estimator alone on every window, and gated by the monitor as the node runs it).
 
     python benchmarks/bench_self_heal.py [--quick] [--write-docs]
 """
@@ -79,6 +79,9 @@ class Rig:
     rectified: bool
     n_frames: int
     images: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]]  # (frame, dR) -> pair
+    # exact matches (frame, dR) -> (pts_a, pts_b) in the estimator's pixels, None: from the
+    # clean pair's matches
+    exact: Callable[[int, np.ndarray], tuple[np.ndarray, np.ndarray]] | None = None
 
 
 @dataclass
@@ -110,7 +113,7 @@ def kitti(n_frames: int) -> Rig:
 
 
 def synthetic(n_frames: int, seed: int) -> Rig:
-    frames = stereo_sequence(n_frames, speed_m=0.1, seed=seed)
+    frames = stereo_sequence(n_frames, speed_m=0.05, seed=seed)
     scene = street_scene(seed)
     cam_a, cam_b = frames[0].cameras
     R0 = cam_b.R @ cam_a.R.T
@@ -130,7 +133,36 @@ def synthetic(n_frames: int, seed: int) -> Rig:
             right = render(scene, Camera(cb.K, dR @ cb.R, dR @ cb.t, cb.size))
         return left, right
 
-    return Rig(f"synthetic (seed {seed})", calib, (ma, mb), False, n_frames, images)
+    def exact(k: int, dR: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        ca, cb = frames[k].cameras
+        return scene_matches(scene, ca, Camera(cb.K, dR @ cb.R, dR @ cb.t, cb.size))
+
+    return Rig(f"synthetic (seed {seed})", calib, (ma, mb), False, n_frames, images, exact)
+
+
+def scene_matches(scene, cam_a: Camera, cam_b: Camera, step: int = 8):
+    """Exact matches: a grid of a's pixels cast onto the nearest plane, projected into b."""
+    w, h = cam_a.size
+    uu, vv = np.meshgrid(np.arange(step / 2, w, step), np.arange(step / 2, h, step))
+    pa = np.stack([uu.ravel(), vv.ravel()], axis=1)
+    rays = (cam_a.R.T @ np.linalg.inv(cam_a.K) @ np.c_[pa, np.ones(len(pa))].T).T
+    C = cam_a.center
+    depth = np.full(len(pa), np.inf)
+    for plane in scene.planes:
+        th, tw = plane.texture.shape[:2]
+        n = np.cross(plane.u, plane.v)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lam = (n @ (plane.origin - C)) / (rays @ n)
+        st = (C + rays * lam[:, None] - plane.origin) @ np.linalg.pinv(np.c_[plane.u, plane.v]).T
+        on = (lam > 0) & (st[:, 0] >= 0) & (st[:, 0] <= tw - 1) & (st[:, 1] >= 0)
+        on &= (st[:, 1] <= th - 1) & (lam < depth)
+        depth[on] = lam[on]
+    hit = np.isfinite(depth)
+    X = C + rays[hit] * depth[hit, None]
+    xb = (cam_b.P @ np.c_[X, np.ones(len(X))].T).T
+    pb = xb[:, :2] / xb[:, 2:]
+    inside = np.all((pb >= 0) & (pb <= np.array(cam_b.size) - 1), axis=1) & (xb[:, 2] > 0)
+    return pa[hit][inside], pb[inside]
 
 
 def rotation(axis: str, deg: float) -> np.ndarray:
@@ -202,7 +234,9 @@ def ground_truth_matches(clean: list[Pair], calib: StereoCalibration, k: int, H:
     return p.pts_a[sel], pb
 
 
-def gated_corrections(pairs: list[Pair], calib: StereoCalibration, cfg: CorrectionConfig) -> list[int]:
+def gated_corrections(
+    pairs: list[Pair], calib: StereoCalibration, cfg: CorrectionConfig
+) -> list[int]:
     """Pairs at which the node's flow (monitor WARN/ERROR -> estimate) issues a correction."""
     monitor = CalibrationMonitor(MonitorConfig())
     window = CorrectionWindow(cfg.window, cfg.min_matches)
@@ -218,6 +252,7 @@ def gated_corrections(pairs: list[Pair], calib: StereoCalibration, cfg: Correcti
 
 def evaluate_rig(pipe: Pipeline, rig: Rig, change: int, angles, axes, windows, cfg, log):
     """Trials, image figures and clean-rig figures of one rig."""
+    n_img = windows[min(1, len(windows) - 1)]  # the window whose correction rectifies
     t0 = time.perf_counter()
     clean = run_pairs(pipe, rig, np.eye(3), rig.n_frames)
     omega_clean = pair_rotations(rig.calib, window_of(clean), cfg).mean(axis=0)
@@ -245,7 +280,7 @@ def evaluate_rig(pipe: Pipeline, rig: Rig, change: int, angles, axes, windows, c
                 for s in range(change, rig.n_frames - n + 1, n):
                     res = estimate_correction(rig.calib, window_of(pairs[s : s + n]), cfg)
                     trials.append(Trial(rig.name, axis, deg, n, res, truth))
-            first = [t for t in trials if (t.axis, t.deg) == (axis, deg) and t.n == windows[min(1, len(windows) - 1)]]
+            first = [t for t in trials if (t.axis, t.deg) == (axis, deg) and t.n == n_img]
             fix = first[0].result.correction if first else None
             true_models = corrected_models(
                 *rig.models, R_truth @ rig.calib.R, R_truth @ rig.calib.t, rig.rectified
@@ -255,11 +290,14 @@ def evaluate_rig(pipe: Pipeline, rig: Rig, change: int, angles, axes, windows, c
                 cases["corrected"] = corrected_models(*rig.models, fix.R, fix.t, rig.rectified)
             K = rig.calib.model_b.K
             H = K @ dR @ np.linalg.inv(K)
-            frames = list(range(change, min(change + windows[min(1, len(windows) - 1)], rig.n_frames)))
+            frames = list(range(change, min(change + n_img, rig.n_frames)))
             vd = {c: [] for c in cases}
             sg = {c: [] for c in cases}
             for k in frames:
-                pa, pb = ground_truth_matches(clean, rig.calib, k, H)
+                if rig.exact is not None:
+                    pa, pb = rig.exact(k, dR)
+                else:
+                    pa, pb = ground_truth_matches(clean, rig.calib, k, H)
                 for c, models in cases.items():
                     vd[c].append(vertical_disparity(models, pa, pb))
             for k in frames[:: max(1, len(frames) // 3)][:3]:
@@ -267,11 +305,11 @@ def evaluate_rig(pipe: Pipeline, rig: Rig, change: int, angles, axes, windows, c
                 for c, models in cases.items():
                     sg[c].append(sgbm_share(models, left, right, n_disp))
             order = ("stale", "corrected", "true")
-            images.append((rig.name, axis, deg,
-                           [float(np.median(vd[c])) if c in vd else np.nan for c in order],
-                           [float(np.mean(sg[c])) if c in sg else np.nan for c in order]))  # fmt: skip
+            vd_row = [float(np.median(vd[c])) if c in vd else np.nan for c in order]
+            sg_row = [float(np.mean(sg[c])) if c in sg else np.nan for c in order]
+            images.append((rig.name, axis, deg, vd_row, sg_row))
             got = "none" if fix is None else f"{fix.axes_deg[AXES[axis]]:+.3f}"
-            log(f"{rig.name}: {deg} deg {axis}: N={windows[min(1, len(windows) - 1)]} correction {got} (truth "
+            log(f"{rig.name}: {deg} deg {axis}: N={n_img} correction {got} (truth "
                 f"{truth[AXES[axis]]:+.3f}); vertical disparity stale/corrected/true "
                 + "/".join(f"{v:.2f}" for v in images[-1][3])
                 + f" px ({time.perf_counter() - t0:.0f} s)")  # fmt: skip
@@ -338,8 +376,11 @@ def summary(trials: list[Trial]) -> str:
 
 
 def image_table(images) -> str:
-    rows = ["| rig | knock | vertical disparity stale / corrected / true (px) | SGBM valid "
-            "share stale / corrected / true | corrected vs true |", "|---|---|---|---|---|"]
+    rows = [
+        "| rig | knock | vertical disparity stale / corrected / true (px) | SGBM valid "
+        "share stale / corrected / true | corrected vs true |",
+        "|---|---|---|---|---|",
+    ]
     for rig, axis, deg, vd, sg in images:
         rel = sg[1] / sg[2] - 1 if np.isfinite(sg[1]) else np.nan
         rows.append(f"| {rig} | {deg} deg {axis} | {' / '.join(_fmt(v, 2) for v in vd)} | "
@@ -382,6 +423,7 @@ def main(argv: list[str] | None = None) -> int:
         images += im
         clean_rows.append((rig.name, *cl, np.degrees(om)))
     elapsed = time.perf_counter() - t0
+    n_img = windows[min(1, len(windows) - 1)]
     clean = ["| rig | clean reading pitch / yaw / roll (deg) | corrections on clean windows "
              "(estimator alone) | pairs with a correction (monitor-gated, as the node) |",
              "|---|---|---|---|"]  # fmt: skip
@@ -399,7 +441,7 @@ def main(argv: list[str] | None = None) -> int:
         "calibration unless determined.",
         "**Corrected rotation per window**\n\n" + accuracy_table(trials, windows),
         "**Intervals over all issued corrections** (95 %)\n\n" + summary(trials),
-        f"**Rectified with the stale, the corrected (N = {windows[min(1, len(windows) - 1)]}) and the true "
+        f"**Rectified with the stale, the corrected (N = {n_img}) and the true "
         "calibration** (median over the window's frames of the median vertical disparity of "
         "ground-truth matches; SGBM on 3 frames)\n\n" + image_table(images),
         "**Clean rigs**\n\n" + "\n".join(clean),

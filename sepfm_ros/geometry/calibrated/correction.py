@@ -401,7 +401,9 @@ def estimate_correction(
             f"(need {config.min_pairs})",
         )
     kept = [f for f, k in zip(pair_fits, keep, strict=True) if k]
-    coverage = _coverage(calib, np.concatenate([p.pts_b for p, k in zip(pairs, keep) if k]))
+    coverage = _coverage(
+        calib, np.concatenate([p.pts_b for p, k in zip(pairs, keep, strict=True) if k])
+    )
     if coverage < config.min_coverage:
         return CorrectionResult(
             None,

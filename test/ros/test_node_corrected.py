@@ -11,7 +11,10 @@ first frame on. Once the calibration check is at WARN and the correction has its
   calibration (KITTI's own residual, about 0.3 px); a deactivated node republishes nothing;
 - ``apply_correction:=true``: each driver's ``set_camera_info`` service (a server in this test
   process) receives the corrected camera_info once; a driver that refuses is counted;
-- the defaults: nothing on the corrected topics, no set_camera_info call.
+- the defaults: nothing on the corrected topics, no set_camera_info call;
+- ``image_transport:=compressed``: the images come back as received on
+  ``~/corrected/<side>/image_raw/compressed``;
+- a subscriber of a corrected topic alone makes a node with ``always_on:=false`` hold its inputs.
 
 The vertical disparity is measured on Lucas-Kanade tracks from the left rectified image to the
 right one, kept when the track back lands within 0.2 px of its start.
@@ -32,7 +35,14 @@ rclpy = pytest.importorskip("rclpy")
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
 from lifecycle_msgs.msg import Transition  # noqa: E402
 from lifecycle_msgs.srv import ChangeState  # noqa: E402
-from ros_helpers import RELIABLE, header, image_msg, start_node  # noqa: E402
+from ros_helpers import (  # noqa: E402
+    RELIABLE,
+    STARTUP_TIMEOUT,
+    NodeProcess,
+    header,
+    image_msg,
+    start_node,
+)
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image  # noqa: E402
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 
@@ -41,7 +51,7 @@ from sepfm_ros.ros.msgs.diagnostics import status_values  # noqa: E402
 from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
 from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed  # noqa: E402
 
-pytestmark = pytest.mark.slow  # four nodes, each fed 15-20 KITTI pairs: about 4 minutes
+pytestmark = pytest.mark.slow  # four nodes fed 12-16 KITTI pairs each, and one more: about 5 minutes
 
 SIZE = (1241, 376)
 N_FRAMES = 51  # kitti_seq2's stereo frames
@@ -418,5 +428,36 @@ def test_compressed_input_comes_back_on_the_compressed_corrected_topic(ros, tmp_
                     assert image.format == sent.format and bytes(image.data) == bytes(sent.data)
                     assert stamp_ns(info.header.stamp) == stamp
                     assert info.header.frame_id == image.header.frame_id == f"{side}_optical"
+    finally:
+        proc.stop()
+
+
+def test_a_subscriber_of_the_corrected_topics_is_demand(ros, tmp_path):
+    node, ns = "sepfm_heal_demand", "/heal_demand"
+    # reliable: the inputs are subscribed at once (auto waits for their publishers)
+    args = node_args(
+        ns, "publish_corrected:=true", "always_on:=false", "input_reliability:=reliable"
+    )
+    proc = NodeProcess(node, tmp_path, *args)
+    topic = f"{ns}/left/image_raw"
+
+    def wait(condition, what: str) -> None:
+        deadline = time.monotonic() + STARTUP_TIMEOUT
+        while not condition():
+            assert time.monotonic() < deadline, f"{what}:\n{proc.output()}"
+            time.sleep(0.1)
+
+    try:
+        wait(
+            lambda: ros.node.count_publishers(f"/{node}/corrected/left/image_raw") == 1, "no topic"
+        )
+        time.sleep(2.0)  # active, idle: no subscriber of any output
+        assert ros.node.count_subscribers(topic) == 0
+        sub = ros.node.create_subscription(
+            CameraInfo, f"/{node}/corrected/right/camera_info", lambda m: None, RELIABLE
+        )
+        wait(lambda: ros.node.count_subscribers(topic) == 1, "the subscriber is not demand")
+        ros.node.destroy_subscription(sub)
+        wait(lambda: ros.node.count_subscribers(topic) == 0, "inputs held without demand")
     finally:
         proc.stop()

@@ -7,7 +7,8 @@ This module wires the parts together; each lives in its own module: the paramete
 (:mod:`~sepfm_ros.ros.node.subscriptions`), the lifecycle, warm-up and demand
 (:mod:`~sepfm_ros.ros.node.lifecycle`), stereo and motion pairing
 (:mod:`sepfm_ros.stream.pairing`), the latest-only slots between the executor and the two worker
-threads (:mod:`~sepfm_ros.stream.scheduling`), and health (:mod:`~sepfm_ros.stream.health`).
+threads (:mod:`~sepfm_ros.stream.scheduling`), health (:mod:`~sepfm_ros.stream.health`), and a
+knocked rig's corrected topics and set_camera_info calls (:mod:`~sepfm_ros.ros.node.corrected`).
 
 Threading: the executor (single-threaded) only runs cheap callbacks: they validate a message's
 fields, pair frames and offer the pair to the scheduler. Two worker threads then run the

@@ -52,29 +52,13 @@ from sepfm_ros.geometry.estimate import Estimate, StatusCode
 from sepfm_ros.geometry.fundamental.checks import input_degeneracy, validate_points, validate_size
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.final import finish
-from sepfm_ros.geometry.fundamental.options import Scoring, Solver
 from sepfm_ros.geometry.fundamental.task import FundamentalTask, sample_cap
-from sepfm_ros.geometry.options import EstimatorOptions
+from sepfm_ros.geometry.options import DEFAULT_METHOD, METHOD_SPECS, METHODS, EstimatorOptions
 from sepfm_ros.geometry.robust.loop import Budget
 from sepfm_ros.geometry.separable.method import SeparableOptions, separable
 
 __all__ = ["DEFAULT_METHOD", "METHODS", "estimate_fundamental"]
 
-# method -> (separable?, solver, scoring)
-_METHODS: dict[str, tuple[bool, Solver, Scoring]] = {
-    "sep4": (True, "seven", "msac"),
-    "sep5": (True, "eight", "msac"),
-    "sep4-lmeds": (True, "seven", "lmeds"),
-    "sep5-lmeds": (True, "eight", "lmeds"),
-    "ransac7": (False, "seven", "msac"),
-    "ransac8": (False, "eight", "msac"),
-    "lmeds7": (False, "seven", "lmeds"),
-    "lmeds8": (False, "eight", "lmeds"),
-}
-METHODS = tuple(_METHODS)
-#: The method of the node, ``process``, ``eval``'s comparisons and the library when none is named:
-#: the one that measures best (docs/benchmarks.md, ablation and hard-set sections).
-DEFAULT_METHOD = "sep4"
 _DEFAULTS = EstimatorOptions()
 
 
@@ -109,7 +93,7 @@ def estimate_fundamental(
         ValueError: unknown method or option, malformed points or sizes, too few points.
     """
     t_start = time.perf_counter()
-    if method not in _METHODS:
+    if method not in METHOD_SPECS:
         raise ValueError(f"unknown method {method!r}; expected one of {METHODS}")
     if options is not None and not isinstance(options, EstimatorOptions):
         raise ValueError(f"options must be an EstimatorOptions, got {type(options).__name__}")
@@ -118,7 +102,7 @@ def estimate_fundamental(
         raise ValueError(f"threshold must be positive, got {threshold}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    is_separable, solver, scoring = _METHODS[method]
+    is_separable, solver, scoring = METHOD_SPECS[method]
     size1 = validate_size(image_size1, "image_size1")
     size2 = validate_size(image_size1 if image_size2 is None else image_size2, "image_size2")
     p1, p2 = validate_points(pts1, pts2, 7 if solver == "seven" else 8)

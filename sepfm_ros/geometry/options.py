@@ -25,12 +25,33 @@ from __future__ import annotations
 from dataclasses import dataclass, fields
 from typing import Any
 
-from sepfm_ros.geometry.fundamental.options import Checks, LocalOptimization, Sampling
+from sepfm_ros.geometry.fundamental.options import (
+    Checks,
+    LocalOptimization,
+    Sampling,
+    Scoring,
+    Solver,
+)
 from sepfm_ros.geometry.robust.options import SamplingOptions
-from sepfm_ros.geometry.separable.line_pairs import LineSearchOptions
-from sepfm_ros.geometry.separable.options import FixedPoints, Lines, Race
+from sepfm_ros.geometry.separable.options import FixedPoints, Lines, LineSearchOptions, Race
 
-__all__ = ["EstimatorOptions"]
+__all__ = ["DEFAULT_METHOD", "METHODS", "METHOD_SPECS", "EstimatorOptions"]
+
+#: method -> (separable?, minimal solver, scoring)
+METHOD_SPECS: dict[str, tuple[bool, Solver, Scoring]] = {
+    "sep4": (True, "seven", "msac"),
+    "sep5": (True, "eight", "msac"),
+    "sep4-lmeds": (True, "seven", "lmeds"),
+    "sep5-lmeds": (True, "eight", "lmeds"),
+    "ransac7": (False, "seven", "msac"),
+    "ransac8": (False, "eight", "msac"),
+    "lmeds7": (False, "seven", "lmeds"),
+    "lmeds8": (False, "eight", "lmeds"),
+}
+METHODS = tuple(METHOD_SPECS)
+#: The method of the node, ``process``, ``eval``'s comparisons and the library when none is named:
+#: the one that measures best (docs/benchmarks.md, ablation and hard-set sections).
+DEFAULT_METHOD = "sep4"
 
 #: part attribute -> its type, in the order of the table above
 _PARTS: dict[str, type] = {

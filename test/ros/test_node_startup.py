@@ -73,6 +73,25 @@ def test_node_command_imports_no_bag_or_progress_bar_modules():
     assert r.returncode == 0, f"the node imports {r.stdout.strip()}\n{r.stderr[-2000:]}"
 
 
+# The estimator's modules (numba's compiler, scipy, the pipeline and the answers built from it):
+# loaded by the kernel warm-up thread and at configure, after the lifecycle node is in the graph.
+# Importing them first took about a second and a half, most of the 2 s the node has to appear.
+STARTUP_FORBIDDEN = ("numba", "scipy", "ruamel", "sepfm_ros.geometry.estimator")
+STARTUP_FORBIDDEN += ("sepfm_ros.pipeline.pipeline", "sepfm_ros.ros.session.answer")
+
+
+@pytest.mark.parametrize("command", ["node", "rectify"])
+def test_node_start_up_path_leaves_the_estimator_modules_to_the_warm_up(command):
+    pytest.importorskip("rclpy")
+    code = (
+        f"import sys, sepfm_ros.cli, sepfm_ros.ros.commands.{command};"
+        f"bad = sorted(m for m in sys.modules if m.startswith({STARTUP_FORBIDDEN!r}));"
+        "print(bad); sys.exit(1 if bad else 0)"
+    )
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, f"start-up imports {r.stdout.strip()}\n{r.stderr[-2000:]}"
+
+
 class _ShutDuringSpin(SingleThreadedExecutor):
     """An executor whose context is shut down (as rclpy's SIGTERM handler does) right after
     spin checked it and before the wait set is built: the race a signal can hit."""

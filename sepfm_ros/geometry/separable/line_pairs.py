@@ -21,6 +21,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from sepfm_ros.geometry.separable.options import LineSearchOptions
+
 
 @dataclass(frozen=True)
 class LinePair:
@@ -33,28 +35,6 @@ class LinePair:
     line1: np.ndarray
     line2: np.ndarray
     support: np.ndarray
-
-
-@dataclass(frozen=True)
-class LineSearchOptions:
-    """Parameters of the line-pair search.
-
-    width: working resolution (px) of the binary images; points are scaled by width / image width.
-    min_votes: minimum Hough votes of a line (the paper's "at least four correspondences").
-    distance: C, the point-to-line incidence distance, in px at the working resolution.
-    hough_points: how many of the best-ranked matches are drawn into the binary images (all
-        matches are then tested for incidence). Drawing every match makes Hough find thousands of
-        spurious lines on textured scenes.
-    max_lines: most lines kept per image (strongest first).
-    max_pairs: most line pairs returned (best joint count first, overlapping supports suppressed).
-    """
-
-    width: int = 512
-    min_votes: int = 4
-    distance: float = 1.5
-    hough_points: int = 300
-    max_lines: int = 80
-    max_pairs: int = 6
 
 
 def working_scale(image_size: tuple[float, float], width: int) -> float:

@@ -13,13 +13,36 @@ from sepfm_ros.geometry.fundamental.options import (
     require_positive,
 )
 from sepfm_ros.geometry.robust.options import PoolRule
-from sepfm_ros.geometry.separable.line_pairs import LineSearchOptions
+
+
+@dataclass(frozen=True)
+class LineSearchOptions:
+    """Parameters of the line-pair search.
+
+    width: working resolution (px) of the binary images; points are scaled by width / image width.
+    min_votes: minimum Hough votes of a line (the paper's "at least four correspondences").
+    distance: C, the point-to-line incidence distance, in px at the working resolution.
+    hough_points: how many of the best-ranked matches are drawn into the binary images (all
+        matches are then tested for incidence). Drawing every match makes Hough find thousands of
+        spurious lines on textured scenes.
+    max_lines: most lines kept per image (strongest first).
+    max_pairs: most line pairs returned (best joint count first, overlapping supports suppressed).
+    """
+
+    width: int = 512
+    min_votes: int = 4
+    distance: float = 1.5
+    hough_points: int = 300
+    max_lines: int = 80
+    max_pairs: int = 6
+
 
 __all__ = [
     "HOUGH_MIN_VOTES",
     "HOUGH_POINTS",
     "SAMPLE_PLANE_FACTOR",
     "FixedPoints",
+    "LineSearchOptions",
     "Lines",
     "Race",
     "Triple",

@@ -34,22 +34,22 @@ from __future__ import annotations
 import threading
 import time
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-import numpy as np
 from rclpy.lifecycle import LifecycleNode
 from rclpy.publisher import Publisher
 from sensor_msgs.msg import CameraInfo, CompressedImage, Image
 from sensor_msgs.srv import SetCameraInfo
 from std_msgs.msg import Header
 
-from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
-from sepfm_ros.pipeline.calibration import StreamCalibration
-from sepfm_ros.ros.msgs.calibration import camera_info_from_model
 from sepfm_ros.ros.node.camera_info import node_camera_info_topic
 from sepfm_ros.ros.node.keep_serving import ThrottledLog
 from sepfm_ros.ros.node.lifecycle import state_name
 from sepfm_ros.ros.node.outputs import RELIABLE
+
+if TYPE_CHECKING:  # the calibration modules load at configure, off the node's start-up path
+    from sepfm_ros.geometry.calibrated.camera import CameraModel
+    from sepfm_ros.pipeline.calibration import StreamCalibration
 
 SIDES = ("left", "right")
 SET_CAMERA_INFO = "set_camera_info"
@@ -77,6 +77,8 @@ def set_camera_info_service(node: Any, image_base: str) -> str:
 
 def corrected_infos(models: tuple[CameraModel, CameraModel], headers: list[Header]) -> list[Any]:
     """The corrected CameraInfo of each camera under its image's header."""
+    from sepfm_ros.ros.msgs.calibration import camera_info_from_model
+
     return [camera_info_from_model(m, h) for m, h in zip(models, headers, strict=True)]
 
 
@@ -94,6 +96,8 @@ def driver_models(
     R = R_corrected R_received (raw frame -> stale-rectified -> corrected-rectified) and the
     corrected P.
     """
+    from sepfm_ros.geometry.calibrated.camera import CameraModel
+
     if not rectified:
         return corrected
     a, b = (
@@ -300,6 +304,10 @@ class CorrectedStereo:
         """The correction in force after a pair: ``calibration``'s
         :meth:`~StreamCalibration.corrected_models` (none when it cannot build them: logged);
         ``images``: the pair's (left, right), whose headers the driver's camera_info gets."""
+        import numpy as np
+
+        from sepfm_ros.geometry.calibrated.camera import CalibrationError
+
         try:
             models = calibration.corrected_models()
         except (CalibrationError, ValueError, np.linalg.LinAlgError) as err:

@@ -1,15 +1,18 @@
-"""The pairs between the sepfm node's executor and its two worker threads."""
+"""The pairs between the sepfm node's executor and its two worker threads, and those threads."""
 
 from __future__ import annotations
 
+import threading
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from std_msgs.msg import Header
 
-from sepfm_ros.pipeline.pipeline import MatchedPair
-from sepfm_ros.ros.session.answer import PairAnswer, PairHeaders
+if TYPE_CHECKING:  # the pipeline's modules load after the node is in the graph
+    from sepfm_ros.pipeline.pipeline import MatchedPair
+    from sepfm_ros.ros.session.answer import PairAnswer, PairHeaders
 
 
 @dataclass
@@ -25,6 +28,8 @@ class Job:
 
     def headers(self) -> PairHeaders:
         """The pair's output header and its images' headers."""
+        from sepfm_ros.ros.session.answer import PairHeaders
+
         return PairHeaders(self.header, self.msg_a.header, self.msg_b.header)
 
 
@@ -40,3 +45,17 @@ class MatchedJob:
     wait_ms: float  # receipt -> start of processing (decode)
     matched_at: float  # time.monotonic() when matching ended
     failure: PairAnswer | None = None
+
+
+def start_worker(loop: Callable[[], None], name: str) -> threading.Thread:
+    """Run ``loop`` on a started daemon thread called ``name``, in the OS too (``top -H``)."""
+
+    def run() -> None:
+        from sepfm_ros.pipeline.pipeline import name_native_thread
+
+        name_native_thread()
+        loop()
+
+    thread = threading.Thread(target=run, name=name, daemon=True)
+    thread.start()
+    return thread

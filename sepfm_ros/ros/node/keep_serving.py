@@ -18,7 +18,7 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
-from sepfm_ros.ros.session.answer import internal_error_kind, internal_error_text
+from sepfm_ros.ros.session.internal_errors import internal_error_kind, internal_error_text
 from sepfm_ros.stream.health import LogThrottle
 
 if TYPE_CHECKING:

@@ -23,8 +23,6 @@ from rclpy._rclpy_pybind11 import RCLError
 from rclpy.lifecycle import LifecycleNode, LifecycleState
 from rclpy.lifecycle import TransitionCallbackReturn as Ret
 
-from sepfm_ros.pipeline.compiled import warm_up
-
 DEMAND_POLL_S = 0.2  # how often the demand gate looks at the output subscribers
 IDLE = "idle: no subscribers"  # the /diagnostics message of an active node without demand
 WARMING_UP = "warming up: compiling or loading the estimator's kernels"
@@ -54,6 +52,10 @@ class KernelWarmUp:
 
     def _run(self) -> None:
         try:
+            # imported here, on this thread: the estimator's modules (numba, scipy) stay off the
+            # start-up path, so the node is in the graph before they load
+            from sepfm_ros.pipeline.compiled import warm_up
+
             self.seconds = warm_up()
         finally:
             self._done.set()

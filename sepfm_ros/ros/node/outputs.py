@@ -18,7 +18,7 @@ count."""
 from __future__ import annotations
 
 import time
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
@@ -35,10 +35,11 @@ from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
 from sepfm_msgs.msg import MatchArray, TwoViewEstimate
-from sepfm_ros.pipeline.drawing import draw_result
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array
 from sepfm_ros.ros.msgs.image_conversion import numpy_to_compressed, numpy_to_image
-from sepfm_ros.ros.session.answer import PairAnswer, add_timings
+
+if TYPE_CHECKING:  # created at configure: the pipeline's modules load after the graph start-up
+    from sepfm_ros.ros.session.answer import PairAnswer
 
 #: CompressedImage.format of ~/debug_image/compressed (image_transport's compressed plugin)
 DEBUG_COMPRESSED_FORMAT = "bgr8; jpeg compressed bgr8"
@@ -94,6 +95,9 @@ class NodeOutputs:
         matches, then the estimate with the milliseconds spent publishing before it ("publish"
         stage, returned); the debug image last, drawn only for a subscriber (``images``: the
         decoded pair; none for a failure record)."""
+        from sepfm_ros.pipeline.drawing import draw_result
+        from sepfm_ros.ros.session.answer import add_timings
+
         t0 = time.perf_counter()
         for publisher, msg in (
             (self.pose, answer.transform),

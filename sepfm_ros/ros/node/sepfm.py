@@ -25,7 +25,7 @@ import threading
 import time
 from collections import Counter
 from collections.abc import Callable
-from typing import Any, cast
+from typing import TYPE_CHECKING, Any, cast
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus
 from rcl_interfaces.msg import SetParametersResult
@@ -33,16 +33,13 @@ from rclpy.parameter import Parameter
 from sensor_msgs.msg import CompressedImage, Image
 from std_msgs.msg import Header
 
-from sepfm_ros.pipeline.pipeline import (
-    name_native_thread,
-)
 from sepfm_ros.ros.msgs.diagnostics import diagnostic_array, health_status, status_name
 from sepfm_ros.ros.msgs.headers import copy_header, stamp_ns
 from sepfm_ros.ros.msgs.image_conversion import ZeroStepNotes
 from sepfm_ros.ros.node.camera_info import CameraInfoInputs, calibration_in_use_text
 from sepfm_ros.ros.node.corrected import CorrectedStereo
 from sepfm_ros.ros.node.dds import UNCONFIGURED, DdsSetup
-from sepfm_ros.ros.node.jobs import Job, MatchedJob
+from sepfm_ros.ros.node.jobs import Job, MatchedJob, start_worker
 from sepfm_ros.ros.node.keep_serving import ThrottledLog, guarded
 from sepfm_ros.ros.node.lifecycle import (
     IDLE,
@@ -56,16 +53,7 @@ from sepfm_ros.ros.node.lifecycle import (
 from sepfm_ros.ros.node.memory import release_free_memory
 from sepfm_ros.ros.node.outputs import RELIABLE, NodeOutputs
 from sepfm_ros.ros.node.subscriptions import InputSubscription, input_topic, subscription_values
-from sepfm_ros.ros.session.answer import (
-    BadInput,
-    PairAnswer,
-    add_timings,
-    decode_pair,
-    internal_error_kind,
-    internal_error_text,
-    precheck,
-)
-from sepfm_ros.ros.session.calibrated import CamerasUpdate
+from sepfm_ros.ros.session.internal_errors import internal_error_kind, internal_error_text
 from sepfm_ros.ros.session.parameters import (
     DIAGNOSTIC_PERIOD,
     NODE_NAME,
@@ -76,11 +64,15 @@ from sepfm_ros.ros.session.parameters import (
     parameter_error,
     renamed_values,
 )
-from sepfm_ros.ros.session.session import Session, configure_pairing
 from sepfm_ros.stream.health import ERROR, OK, STALL_CHECK_PERIOD_S, WARN, Health
 from sepfm_ros.stream.pairing import Frame, MotionPairing, PairOutcome, StereoPairing
 from sepfm_ros.stream.scheduling import PairScheduler
 from sepfm_ros.stream.sync import LEFT, RIGHT
+
+if TYPE_CHECKING:  # imported where first used, after the warm-up: off the start-up path
+    from sepfm_ros.ros.session.answer import BadInput, PairAnswer
+    from sepfm_ros.ros.session.calibrated import CamerasUpdate
+    from sepfm_ros.ros.session.session import Session
 
 LEVEL_BYTES = {OK: DiagnosticStatus.OK, WARN: DiagnosticStatus.WARN, ERROR: DiagnosticStatus.ERROR}
 
@@ -138,6 +130,8 @@ class SepfmNode(ManagedNode):
 
     def configure_node(self, warm_s: float) -> None:
         """The pipeline, the outputs and the workers (the kernels are ready)."""
+        from sepfm_ros.ros.session.session import Session
+
         values = self._param_values()
         self._session = Session(
             values,
@@ -154,11 +148,9 @@ class SepfmNode(ManagedNode):
         self._corrected = CorrectedStereo(self, self._bases, self._log, values, self._transport)
         self._calib_status = None
         self._workers = [
-            threading.Thread(target=self._match_loop, name="sepfm-match", daemon=True),
-            threading.Thread(target=self._estimate_loop, name="sepfm-estimate", daemon=True),
+            start_worker(self._match_loop, "sepfm-match"),
+            start_worker(self._estimate_loop, "sepfm-estimate"),
         ]
-        for worker in self._workers:
-            worker.start()
         self.get_logger().info(
             f"configured (estimator kernels ready in {warm_s:.1f} s): {self._mode} mode, "
             f"{self._transport} transport, input reliability {values['input_reliability']}, "
@@ -283,6 +275,8 @@ class SepfmNode(ManagedNode):
         self._always_on = bool(values["always_on"])  # the demand gate follows it
         if not self.configured:
             return  # read at configure
+        from sepfm_ros.ros.session.session import configure_pairing
+
         self._session.configure(values)
         with self._lock:
             self._epipolar_lines = int(values["debug_epipolar_lines"])
@@ -338,6 +332,8 @@ class SepfmNode(ManagedNode):
 
     def _precheck(self, msg: Any, topic: str) -> bool:
         """Cheap field validation in the callback (no pixel access); False when skipped."""
+        from sepfm_ros.ros.session.answer import precheck
+
         bad = precheck(msg)
         if bad is not None:
             self._bad_input(bad.kind, f"{topic}: {bad.text}")
@@ -419,7 +415,6 @@ class SepfmNode(ManagedNode):
     # ---------------------------------------------------------------- workers
     def _match_loop(self) -> None:
         """Thread ``sepfm-match``: newest pair -> decoded images -> matches -> estimate thread."""
-        name_native_thread()
         while True:
             offered = self._scheduler.take_for_match()
             if offered is None:
@@ -430,7 +425,7 @@ class SepfmNode(ManagedNode):
                 matched = self._match(job)
             except Exception as err:  # keep serving; count, log and answer
                 matched = self._failed(job, self._internal_error_answer(job, err))
-            if isinstance(matched, BadInput):
+            if not isinstance(matched, MatchedJob):  # BadInput
                 self._bad_input(matched.kind, matched.text)
                 answer = self._session.failure(job.headers(), matched)
                 matched = self._failed(job, answer)
@@ -438,7 +433,6 @@ class SepfmNode(ManagedNode):
 
     def _estimate_loop(self) -> None:
         """Thread ``sepfm-estimate``: matched pair -> estimate -> published outputs."""
-        name_native_thread()
         while True:
             taken = self._scheduler.take_for_estimate()
             if taken is None:
@@ -472,6 +466,8 @@ class SepfmNode(ManagedNode):
             self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
     def _match(self, job: Job) -> MatchedJob | BadInput:
+        from sepfm_ros.ros.session.answer import BadInput, decode_pair
+
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
         decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
@@ -500,6 +496,8 @@ class SepfmNode(ManagedNode):
             self.get_logger().info(calibration_in_use_text(self._session.calibrated.calibration))
 
     def _estimate_and_publish(self, item: MatchedJob) -> None:
+        from sepfm_ros.ros.session.answer import add_timings
+
         job = item.job
         queue_ms = (time.monotonic() - item.matched_at) * 1e3
         assert item.matched is not None  # failures are published as they are

@@ -50,8 +50,8 @@ from sepfm_ros.ros.msgs.headers import stamp_ns
 from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 from sepfm_ros.ros.session.answer import (
     ESTIMATOR_INPUT,
-    internal_error_text,
 )
+from sepfm_ros.ros.session.internal_errors import internal_error_text
 from sepfm_ros.ros.session.parameters import ParameterError
 
 Stop = Callable[[], None]  # raises KeyboardInterrupt when a stop was requested

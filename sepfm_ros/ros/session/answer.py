@@ -32,7 +32,6 @@ for a stream.
 from __future__ import annotations
 
 import time
-import traceback
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
@@ -411,13 +410,3 @@ def match_array(headers: PairHeaders, result: PipelineResult) -> MatchArray:
         for ua, va, ub, vb, e, i, o in rows
     ]
     return out
-
-
-def internal_error_kind(err: BaseException) -> str:
-    """The kind under which an internal error is counted in ``/diagnostics``."""
-    return f"internal_{type(err).__name__}"
-
-
-def internal_error_text(err: BaseException) -> str:
-    """An internal error with its traceback, for the log."""
-    return "".join(traceback.format_exception(err))

@@ -19,14 +19,11 @@ from rcl_interfaces.msg import (
     ParameterDescriptor,
     ParameterType,
 )
-from ruamel.yaml import YAML
-from ruamel.yaml.error import YAMLError
 
-from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
-from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
-from sepfm_ros.geometry.calibrated.correction import CorrectionConfig
-from sepfm_ros.pipeline.features import FEATURES
-from sepfm_ros.pipeline.pipeline import PipelineConfig
+from sepfm_ros.geometry.calibrated.correction_config import CorrectionConfig
+from sepfm_ros.geometry.calibrated.monitor import MonitorConfig
+from sepfm_ros.geometry.options import DEFAULT_METHOD, METHODS, EstimatorOptions
+from sepfm_ros.pipeline.config import FEATURES, PipelineConfig
 
 NODE_NAME = "sepfm"
 MODES = ("stereo", "motion")
@@ -463,6 +460,9 @@ def read_params_file(path: str | Path) -> dict[str, Any]:
     ``config/sepfm.yaml``): the ``ros__parameters`` of its ``/**`` and ``sepfm`` sections,
     nested names joined with dots; rclpy's own (``use_sim_time``, ``qos_overrides.*``) are
     left out. ParameterError when the file cannot be read or holds an unknown name or value."""
+    from ruamel.yaml import YAML  # only for a params file: not on the node's start-up path
+    from ruamel.yaml.error import YAMLError
+
     try:
         data = YAML(typ="safe").load(Path(path).read_text())
     except (OSError, YAMLError) as err:

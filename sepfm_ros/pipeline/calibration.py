@@ -10,7 +10,11 @@ node and offline processing.
 - :meth:`StreamCalibration.outputs` turns a result into the relative pose of camera b in camera
   a (unit translation in motion mode; metres of the calibrated baseline for a stereo rig) and,
   for a stereo rig whose P matrices give a baseline, the pair's check against the calibration
-  and the sliding-window decision (:mod:`sepfm_ros.geometry.calibrated.calibration_check`).
+  and the sliding-window decision (:mod:`sepfm_ros.geometry.calibrated.calibration_check`);
+- while that decision is WARN or ERROR, the corrected rig from the matches of the last
+  ``correction_window`` usable pairs (:mod:`sepfm_ros.geometry.calibrated.correction`, a window
+  of its own, cleared when the calibration changes), and :meth:`StreamCalibration.corrected_models`
+  gives the camera_info models a driver should load for it.
 """
 
 from __future__ import annotations
@@ -20,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from sepfm_ros.geometry.calibrated.calibration_check import (
+    ERROR,
+    WARN,
     CalibrationMonitor,
     CalibrationStatus,
     MonitorConfig,
@@ -28,7 +34,14 @@ from sepfm_ros.geometry.calibrated.calibration_check import (
     check_pair,
 )
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.calibrated.correction import (
+    CorrectionConfig,
+    CorrectionResult,
+    CorrectionWindow,
+    estimate_correction,
+)
 from sepfm_ros.geometry.calibrated.pose import RelativePose, relative_pose
+from sepfm_ros.geometry.calibrated.stereo_rectify import corrected_models
 from sepfm_ros.pipeline.pipeline import PipelineResult
 
 
@@ -41,12 +54,16 @@ class CalibratedOutputs:
         scaled: the pose's translation is in metres (stereo rig), not unit length.
         check: the stereo pair's disagreement with the calibration, None without a rig.
         status: the calibration check's decision after this pair, None without a rig.
+        correction: the corrected rig after this pair (``correction.correction`` None with the
+            reason when there is none: not needed, too few pairs, degenerate), None without a
+            rig.
     """
 
     pose: RelativePose | None
     scaled: bool
     check: PairCheck | None
     status: CalibrationStatus | None
+    correction: CorrectionResult | None = None
 
 
 # Two camera_info calibrations are the same when each of K, D, R and P agrees entry by entry to
@@ -82,12 +99,24 @@ class StreamCalibration:
             time: a and b share the model).
         rectified: the images are rectified (``image_rect``), so their pixels are P's.
         monitor: the calibration check's sliding-window parameters.
+        correction: the correction's parameters (its window of pairs among them).
     """
 
-    def __init__(self, stereo: bool, rectified: bool, monitor: MonitorConfig | None = None) -> None:
+    def __init__(
+        self,
+        stereo: bool,
+        rectified: bool,
+        monitor: MonitorConfig | None = None,
+        correction: CorrectionConfig | None = None,
+    ) -> None:
         self.stereo = stereo
         self.rectified = rectified
         self.monitor = CalibrationMonitor(monitor)
+        self.correction_config = correction or CorrectionConfig()
+        self.correction_window = CorrectionWindow(
+            self.correction_config.window, self.correction_config.min_matches
+        )
+        self.correction: CorrectionResult | None = None
         self._models: tuple[CameraModel, CameraModel] | None = None
         self.cameras: tuple[CameraModel, CameraModel] | None = None
         self.rig: StereoCalibration | None = None
@@ -119,6 +148,7 @@ class StreamCalibration:
         self.cameras = cameras
         self.rig, self.rig_problem = rig, problem
         self.monitor.reset()
+        self._reset_correction()
         return True
 
     def clear(self) -> None:
@@ -126,6 +156,29 @@ class StreamCalibration:
         self._models = self.cameras = self.rig = None
         self.rig_problem = None
         self.monitor.reset()
+        self._reset_correction()
+
+    def configure_correction(self, config: CorrectionConfig) -> None:
+        """New correction parameters; the window keeps its newest pairs that still fit."""
+        old = self.correction_window.pairs
+        self.correction_config = config
+        self.correction_window = CorrectionWindow(config.window, config.min_matches)
+        for pair in old:
+            self.correction_window.add(pair.pts_a, pair.pts_b)
+
+    def _reset_correction(self) -> None:
+        self.correction_window.clear()
+        self.correction = None
+
+    def corrected_models(self) -> tuple[CameraModel, CameraModel] | None:
+        """The camera_info models (a, b) of the current correction: the models given to
+        :meth:`update` with R and P of the corrected rectification
+        (:func:`~sepfm_ros.geometry.calibrated.stereo_rectify.corrected_models`); None without
+        a correction."""
+        if self._models is None or self.correction is None or self.correction.correction is None:
+            return None
+        fix = self.correction.correction
+        return corrected_models(*self._models, fix.R, fix.t, self.rectified)
 
     def outputs(self, result: PipelineResult, threshold_px: float) -> CalibratedOutputs:
         """Pose and calibration check of one result estimated with :attr:`cameras`.
@@ -156,4 +209,16 @@ class StreamCalibration:
             min_inliers=self.monitor.config.min_inliers,
             scale_px=threshold_px,
         )
-        return CalibratedOutputs(pose, scaled, check, self.monitor.update(check))
+        status = self.monitor.update(check)
+        if check.usable and check.fit is not None:
+            self.correction_window.add(pts_a[check.fit], pts_b[check.fit])
+        self.correction = self._correction(status)
+        return CalibratedOutputs(pose, scaled, check, status, self.correction)
+
+    def _correction(self, status: CalibrationStatus) -> CorrectionResult:
+        """The correction after this pair's decision: estimated at WARN or ERROR only."""
+        if self.rig is None or status.level not in (WARN, ERROR):
+            return CorrectionResult(
+                None, f"no correction needed: calibration check {status.level_name}"
+            )
+        return estimate_correction(self.rig, self.correction_window, self.correction_config)

@@ -101,7 +101,9 @@ class PairCheck:
             (normal to the baseline and the optical axis; yaw for a horizontal rig).
         rotation_axes_deg: (3,) that rotation as a rotation vector in b's optical axes (x right,
             y down, z forward), degrees: pitch (x), yaw (y), roll (z).
-    usable: at least ``min_inliers`` inliers were measured.
+        usable: at least ``min_inliers`` inliers were measured.
+        fit: (N,) bool mask of the matches the rotation was fitted on (the inliers plus the
+            band), None when the pair is unusable.
     """
 
     n_inliers: int
@@ -110,6 +112,7 @@ class PairCheck:
     rotation_error_deg: float
     rotation_axes_deg: np.ndarray
     usable: bool
+    fit: np.ndarray | None = field(default=None, compare=False, repr=False)
 
 
 def check_pair(
@@ -160,6 +163,7 @@ def check_pair(
         float(np.degrees(np.linalg.norm(observable))),
         np.degrees(rotvec),
         True,
+        fit,
     )
 
 

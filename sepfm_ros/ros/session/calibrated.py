@@ -27,6 +27,7 @@ from std_msgs.msg import Header
 
 from sepfm_ros.geometry.calibrated.calibration_check import CalibrationMonitor, MonitorConfig
 from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.calibrated.correction import CorrectionConfig
 from sepfm_ros.pipeline.calibration import CalibratedOutputs, StreamCalibration
 from sepfm_ros.pipeline.pipeline import PipelineResult
 from sepfm_ros.ros.msgs.calibration import (
@@ -76,6 +77,7 @@ class CalibratedStream:
         stereo: two cameras of a rig (else one camera over time).
         rectified: the images are rectified.
         monitor: the calibration check's parameters.
+        correction: the stereo correction's parameters (defaults when None).
         node_fqn: the node's fully qualified name, for the ``<node FQN>: calibration`` status's
             name; hardware_id: its hardware id.
     """
@@ -87,14 +89,19 @@ class CalibratedStream:
         monitor: MonitorConfig | None,
         node_fqn: str,
         hardware_id: str = "",
+        correction: CorrectionConfig | None = None,
     ) -> None:
-        self.calibration = StreamCalibration(stereo, rectified, monitor)
+        self.calibration = StreamCalibration(stereo, rectified, monitor, correction)
         self.node_fqn = node_fqn
         self.hardware_id = hardware_id
         self._infos: list[Any] | None = None
 
-    def configure_monitor(self, config: MonitorConfig) -> None:
+    def configure_monitor(
+        self, config: MonitorConfig, correction: CorrectionConfig | None = None
+    ) -> None:
         self.calibration.monitor = CalibrationMonitor(config)
+        if correction is not None:
+            self.calibration.configure_correction(correction)
 
     def cameras(self, infos: list[Any] | None, sizes: list[tuple[int, int]]) -> CamerasUpdate:
         """The camera models for a pair whose images have ``sizes`` (width, height).

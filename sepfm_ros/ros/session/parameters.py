@@ -24,6 +24,7 @@ from ruamel.yaml.error import YAMLError
 
 from sepfm_ros.geometry import DEFAULT_METHOD, METHODS, EstimatorOptions
 from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
+from sepfm_ros.geometry.calibrated.correction import CorrectionConfig
 from sepfm_ros.pipeline.features import FEATURES
 from sepfm_ros.pipeline.pipeline import PipelineConfig
 
@@ -37,6 +38,7 @@ MAX_SAMPLES_OPTION = "max_samples"
 
 
 _MONITOR = MonitorConfig()  # the calibration check's defaults
+_CORRECTION = CorrectionConfig()  # the correction's defaults
 
 # the period of the /diagnostics report, named as diagnostic_updater names it
 DIAGNOSTIC_PERIOD = "diagnostic_updater.period"
@@ -214,6 +216,25 @@ PARAMS: dict[str, ParamSpec] = {
     "calibration_error_rotation_deg": ParamSpec(
         _MONITOR.error_rotation_deg, "calibration check: ERROR above this, deg", 0.0001, 180.0
     ),
+    "correction_window": ParamSpec(
+        _CORRECTION.window,
+        "stereo correction: usable pairs whose matches the corrected rotation is fitted on"
+        f" (estimated while the check is WARN or ERROR, from {_CORRECTION.min_pairs} pairs on)",
+        _CORRECTION.min_pairs,
+        10000,
+    ),
+    "publish_corrected": ParamSpec(
+        False,
+        "stereo correction: while a correction is active, publish each image again on"
+        " ~/corrected/<side>/image_raw with the corrected ~/corrected/<side>/camera_info",
+        read_only=True,
+    ),
+    "apply_correction": ParamSpec(
+        False,
+        "stereo correction: send the corrected camera_info to each driver's set_camera_info"
+        " service, which stores it (as camera_calibration does)",
+        read_only=True,
+    ),
     DIAGNOSTIC_PERIOD: ParamSpec(
         1.0, "period of the /diagnostics health report, s", 0.1, 60.0, read_only=True
     ),
@@ -340,6 +361,11 @@ def monitor_config(values: dict[str, Any]) -> MonitorConfig:
     )
 
 
+def correction_config(values: dict[str, Any]) -> CorrectionConfig:
+    """Node parameter values -> the stereo correction's config (ValueError when invalid)."""
+    return CorrectionConfig(window=int(values["correction_window"]))
+
+
 def change_errors(values: dict[str, Any], changes: dict[str, Any]) -> list[str]:
     """Why the run-time parameter ``changes`` (name -> new value) cannot be applied to the
     current ``values`` (empty when they can): read-only, out of range, or an invalid config."""
@@ -358,6 +384,7 @@ def change_errors(values: dict[str, Any], changes: dict[str, Any]) -> list[str]:
         try:
             pipeline_config(values)
             monitor_config(values)
+            correction_config(values)
         except ValueError as err:
             reasons.append(str(err))
     return reasons
@@ -483,6 +510,7 @@ def given_params(items: Sequence[str] = (), params_file: str | Path | None = Non
     try:
         pipeline_config(values)
         monitor_config(values)
+        correction_config(values)
     except ValueError as err:
         raise ParameterError(str(err)) from None
     return GivenParams(values, frozenset(given))

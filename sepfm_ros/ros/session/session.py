@@ -22,6 +22,7 @@ from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 from sepfm_ros.geometry.calibrated.calibration_check import MonitorConfig
+from sepfm_ros.geometry.calibrated.correction import CorrectionConfig
 from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig
 from sepfm_ros.ros.session.answer import (
     AnswerSettings,
@@ -39,6 +40,7 @@ from sepfm_ros.ros.session.calibrated import CalibratedStream
 from sepfm_ros.ros.session.parameters import (
     NODE_NAME,
     ParameterError,
+    correction_config,
     monitor_config,
     parameter_error,
     pipeline_config,
@@ -102,17 +104,18 @@ class Session:
         self.rectified = images_rectified(str(values["images"]), topics)
         try:
             config, monitor = pipeline_config(self.values), monitor_config(self.values)
+            correction = correction_config(self.values)
         except ValueError as err:
             raise ParameterError(str(err)) from None
         self.pipeline = Pipeline(config, cache_size=cache_size, parallel_detect=parallel_detect)
         self.calibrated = CalibratedStream(
-            stereo, self.rectified, monitor, status_name, hardware_id
+            stereo, self.rectified, monitor, status_name, hardware_id, correction
         )
         self.uses_camera_info = bool(values["use_camera_info"])
         self._lock = threading.Lock()
         self._publish_unreliable = bool(values["publish_unreliable"])
         self._pending_config: PipelineConfig | None = None
-        self._pending_monitor: MonitorConfig | None = None
+        self._pending_monitor: tuple[MonitorConfig, CorrectionConfig] | None = None
 
     # ---------------------------------------------------------------- set-up
     def pairing(self, slop_ns: int | None = None) -> StereoPairing[Any] | MotionPairing[Any]:
@@ -127,9 +130,10 @@ class Session:
         """New run-time parameter values (validated by the caller,
         :func:`~.parameters.change_errors`); see the module docstring for when they apply."""
         config, monitor = pipeline_config(dict(values)), monitor_config(dict(values))
+        correction = correction_config(dict(values))
         with self._lock:
             self.values = dict(values)
-            self._pending_config, self._pending_monitor = config, monitor
+            self._pending_config, self._pending_monitor = config, (monitor, correction)
             self._publish_unreliable = bool(values["publish_unreliable"])
 
     def settings(self, config: PipelineConfig | None = None) -> AnswerSettings:
@@ -165,7 +169,7 @@ class Session:
         with self._lock:
             monitor, self._pending_monitor = self._pending_monitor, None
         if monitor is not None:
-            self.calibrated.configure_monitor(monitor)
+            self.calibrated.configure_monitor(*monitor)
         calibration = PairCalibration(self.calibrated, infos) if self.uses_camera_info else None
         settings = self.settings(matched.config)
         return answer_matched(self.pipeline, headers, matched, settings, calibration, timings_ms)

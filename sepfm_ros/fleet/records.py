@@ -45,7 +45,7 @@ class PairRecord:
         correction_pitch_ci95_deg, ...: half-widths of their 95 % intervals, degrees.
         correction_yaw_determined: the data determined yaw (else it is the calibration's);
             None without a correction.
-        correction_pairs: pairs the correction was estimated from (0: none).
+        correction_pairs: pairs the correction was estimated from (None without one).
         correction_reason: why a flagged pair has no correction ("" otherwise).
     """
 
@@ -68,7 +68,7 @@ class PairRecord:
     correction_yaw_ci95_deg: float = math.nan
     correction_roll_ci95_deg: float = math.nan
     correction_yaw_determined: bool | None = None
-    correction_pairs: int = 0
+    correction_pairs: int | None = None
     correction_reason: str = ""
 
 
@@ -252,7 +252,7 @@ class BagRow:
     correction_yaw_ci95_deg: float = math.nan
     correction_roll_ci95_deg: float = math.nan
     correction_yaw_determined: bool | None = None
-    correction_pairs: int = 0
+    correction_pairs: int | None = None
     correction_reason: str = ""
     slices: int = 0
     key: str = ""
@@ -314,7 +314,7 @@ def bag_correction(pairs: list[PairRecord]) -> dict[str, Any]:
     """The correction columns of a flagged bag: those of its last pair with a correction
     (the estimate from the most pairs, at the end of the drift), else the reason its last
     flagged pair gave (``correction_reason``; the rotation columns stay empty)."""
-    corrected = [p for p in pairs if p.correction_pairs > 0]
+    corrected = [p for p in pairs if p.correction_pairs]
     if corrected:
         return {name: getattr(corrected[-1], name) for name in CORRECTION_FIELDS}
     flagged = [p for p in pairs if p.level in FLAG_LEVELS]

@@ -129,7 +129,7 @@ def plot_rig(rig: RigSummary, path: Path, thresholds: Thresholds) -> None:
 
 def _correction_text(row: dict[str, str]) -> str:
     """A flagged bag's corrected rotation with its 95 % interval, or why there is none."""
-    if not row.get("correction_pairs") or row["correction_pairs"] == "0":
+    if not row.get("correction_pairs"):
         return row.get("correction_reason", "").replace("|", "/")
     parts = []
     for axis in ("pitch", "yaw", "roll"):

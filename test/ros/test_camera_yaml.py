@@ -4,6 +4,7 @@ it read by our reader."""
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 import yaml
@@ -47,8 +48,7 @@ def _model(seed: int):
     K = np.array([[700 + rng.uniform(0, 50), 0, 320 + rng.uniform()], [0, 710, 240.5], [0, 0, 1]])
     D = np.array([-0.2, 0.05, 1.3e-5, -7e-6, 0.0])
     a = rng.uniform(-0.02, 0.02, 3)
-    R = np.linalg.qr(np.eye(3) + np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]]))[0]
-    R = R * np.sign(np.diag(R))[None, :]
+    R = cv2.Rodrigues(a)[0]
     P = np.c_[K, [-K[0, 0] * 0.12, 0.0, 0.0]]
     return camera_model(K, D, "plumb_bob", R, P, 640, 480)
 

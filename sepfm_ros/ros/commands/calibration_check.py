@@ -117,7 +117,9 @@ def main(argv: list[str]) -> int:
         try:
             written, line = write_corrected(run, out, args.bag)
         except OSError as err:
-            print(f"calibration_check: cannot write the corrected calibration: {err}", file=sys.stderr)
+            print(
+                f"calibration_check: cannot write the corrected calibration: {err}", file=sys.stderr
+            )
             return 2
         print(line)
         print("wrote " + ", ".join(str(p) for p in written))

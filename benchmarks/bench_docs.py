@@ -41,6 +41,7 @@ SECTIONS = {
     "bench_netns": "python benchmarks/bench_netns.py --write-docs",
     "bench_pose_covariance": "python benchmarks/bench_pose_covariance.py --write-docs",
     "bench_graph": "python benchmarks/bench_graph.py --write-docs",
+    "bench_self_heal": "python benchmarks/bench_self_heal.py --write-docs",
 }
 PREAMBLE = """# Benchmarks
 

@@ -164,7 +164,7 @@ class StreamCalibration:
         self.correction_config = config
         self.correction_window = CorrectionWindow(config.window, config.min_matches)
         for pair in old:
-            self.correction_window.add(pair.pts_a, pair.pts_b)
+            self.correction_window.add(pair.pts_a, pair.pts_b, pair.first)
 
     def _reset_correction(self) -> None:
         self.correction_window.clear()
@@ -211,7 +211,7 @@ class StreamCalibration:
         )
         status = self.monitor.update(check)
         if check.usable and check.fit is not None:
-            self.correction_window.add(pts_a[check.fit], pts_b[check.fit])
+            self.correction_window.add(pts_a, pts_b, check.fit)
         self.correction = self._correction(status)
         return CalibratedOutputs(pose, scaled, check, status, self.correction)
 

@@ -106,9 +106,7 @@ def test_bad_pairs_are_dropped():
 
 
 def test_matches_in_a_small_patch_give_no_correction():
-    result = estimate_correction(
-        _rig(), _window([0.5, 0, 0], 20, spread=0.05), CorrectionConfig()
-    )
+    result = estimate_correction(_rig(), _window([0.5, 0, 0], 20, spread=0.05), CorrectionConfig())
     assert result.correction is None
     assert "degenerate" in result.reason
 

@@ -4,25 +4,29 @@ show. No ROS.
 Model. A knock, heat or a loose mount turns camera b about its own centre by a small rotation
 ``dR``: its centre stays where it was in the rig (camera a's frame), so the relative pose becomes
 ``R' = dR R``, ``t' = dR t`` (``X_b = R X_a + t``). Its essential matrix is ``dR E``: the
-correction acts on b's image alone, as the homography ``K_b dR K_b^-1``. (Keeping ``t`` fixed in
-b's frame instead, as the per-pair check of
+correction acts on b's image alone, as the homography ``K_b dR K_b^-1``, the warp that
+benchmarks inject. (Keeping ``t`` fixed in b's frame instead, as the per-pair check of
 :func:`~sepfm_ros.geometry.calibrated.calibration_check.check_pair` does, moves b's centre
-sideways by ``|t| * angle``: at finite depth this shifts the rows by ``angle * disparity`` and a
-fit of a roll reads about 15 % low on KITTI.)
+sideways by ``|t| * angle``; on KITTI both read the same within 0.005 deg.)
 
 Estimate (:func:`estimate_correction`):
 
 1. each pair of the window is fitted alone (3-dof Sampson fit, soft-L1 beyond
-   :attr:`CorrectionConfig.scale_px`); cached per pair;
-2. pairs whose observable rotation is far from the window's median (more than
-   :attr:`CorrectionConfig.outlier_sigma` robust deviations, MAD) are dropped as bad pairs;
-3. the kept pairs' matches are fitted together (3 dof); the 95 % interval per axis is Student's
-   t over the kept pairs' own fits: ``t_0.975(n-1) * std / sqrt(n)`` (matches of one pair are
-   correlated, pairs much less);
+   :attr:`CorrectionConfig.scale_px`), first on the check's matches, then twice on all its
+   matches within :attr:`CorrectionConfig.band_px` of its own fit; cached per pair;
+2. pairs whose observable rotation is far from the median of the newest
+   :attr:`CorrectionConfig.min_pairs` pairs (more than :attr:`CorrectionConfig.outlier_sigma`
+   robust deviations, MAD) are dropped as bad pairs, and so are the pairs from before a change
+   of the rig;
+3. the estimate is the mean of the kept pairs' fits; the 95 % interval per axis is Student's
+   t over them, ``t_0.975(n-1) * std / sqrt(n)`` (matches of one pair are correlated, pairs
+   much less), with a systematic floor :attr:`CorrectionConfig.systematic_px` in quadrature;
 4. yaw (the rotation about the axis normal to the baseline and b's optical axis) moves points
-   along the epipolar lines: a disparity bias, not an epipolar error. It is kept at the
-   calibrated value (the fit repeated with it fixed) unless its interval is narrower than
-   :attr:`CorrectionConfig.yaw_max_interval_deg` and excludes zero.
+   along the epipolar lines: a disparity bias, not an epipolar error; only the second-order
+   row shift ``angle * (u - cx)(v - cy) / f`` shows it, which a residual distortion or a
+   rectification error of a tenth of a pixel mimics. It is fitted with the other two (fixing it
+   at zero while the matches show one would bias roll) and applied only when its interval is
+   narrower than :attr:`CorrectionConfig.yaw_max_interval_deg` and excludes zero.
 
 No correction (``CorrectionResult.correction is None``, with the reason) from fewer than
 :attr:`CorrectionConfig.min_pairs` pairs, from matches that cover too little of the image, from
@@ -67,6 +71,14 @@ class CorrectionConfig:
             (degrees) and excludes zero.
         min_coverage: the matches must spread over at least this share of the image width and
             height (robust extent, 5th to 95th percentile), else no correction.
+        band_px: after a first fit, the matches within this Sampson distance (px) of the fitted
+            rotation are refitted (twice), so that the matches a large knock moved far from the
+            calibrated F count.
+        systematic_px: a per-match error (px) that does not average out over matches or pairs
+            (the calibration's own accuracy, residual distortion): it adds
+            ``systematic_px * sqrt(diag((J^T J / N)^-1))`` to each interval, in quadrature.
+        min_correction_deg: no correction when the observable correction (pitch and roll) is
+            smaller than this (degrees): below it the rows move by a fraction of a pixel.
     """
 
     window: int = 40
@@ -78,6 +90,9 @@ class CorrectionConfig:
     max_interval_deg: float = 0.1
     yaw_max_interval_deg: float = 0.05
     min_coverage: float = 0.25
+    band_px: float = 2.0
+    systematic_px: float = 0.05
+    min_correction_deg: float = 0.05
 
     def __post_init__(self) -> None:
         errors = []
@@ -87,11 +102,18 @@ class CorrectionConfig:
             errors.append(f"min_pairs must be in [2, window], got {self.min_pairs}")
         if int(self.min_matches) < 5:
             errors.append(f"min_matches must be >= 5, got {self.min_matches}")
-        for name in ("scale_px", "outlier_sigma", "max_interval_deg", "yaw_max_interval_deg"):
+        for name in (
+            "scale_px",
+            "outlier_sigma",
+            "max_interval_deg",
+            "yaw_max_interval_deg",
+            "band_px",
+        ):
             if not float(getattr(self, name)) > 0:
                 errors.append(f"{name} must be > 0, got {getattr(self, name)}")
-        if not float(self.outlier_floor_deg) >= 0:
-            errors.append(f"outlier_floor_deg must be >= 0, got {self.outlier_floor_deg}")
+        for name in ("outlier_floor_deg", "systematic_px", "min_correction_deg"):
+            if not float(getattr(self, name)) >= 0:
+                errors.append(f"{name} must be >= 0, got {getattr(self, name)}")
         if not 0 <= float(self.min_coverage) < 1:
             errors.append(f"min_coverage must be in [0, 1), got {self.min_coverage}")
         if errors:
@@ -102,14 +124,17 @@ class CorrectionConfig:
 class _Pair:
     pts_a: np.ndarray
     pts_b: np.ndarray
-    fits: dict[int, np.ndarray] = field(default_factory=dict)  # id(calib) -> rotvec (3,)
+    first: np.ndarray  # (N,) bool: the matches of the first fit
+    fits: dict[int, object] = field(default_factory=dict)  # id(calib) -> _PairFit
 
 
 class CorrectionWindow:
     """The matches of the last ``window`` usable pairs, for the rotation fit.
 
-    Matches are in the estimator's pixels (undistorted pixels of K for raw images), the ones
-    the calibration check fits: the estimated F's inliers plus the band around the calibrated F.
+    Matches are in the estimator's pixels (undistorted pixels of K for raw images). The first
+    fit of a pair uses the matches the calibration check fits (the estimated F's inliers plus
+    the band around the calibrated F: ``first``); the later fits reselect among all the pair's
+    matches around the fitted rotation.
     """
 
     def __init__(self, window: int = 40, min_matches: int = 20) -> None:
@@ -118,16 +143,20 @@ class CorrectionWindow:
         self.min_matches = int(min_matches)
         self._pairs: deque[_Pair] = deque(maxlen=int(window))
 
-    def add(self, pts_a: np.ndarray, pts_b: np.ndarray) -> bool:
-        """Keep one pair's (N, 2) matches; False (not kept) with fewer than ``min_matches``."""
+    def add(self, pts_a: np.ndarray, pts_b: np.ndarray, first: np.ndarray | None = None) -> bool:
+        """Keep one pair's (N, 2) matches; False (not kept) with fewer than ``min_matches``
+        in ``first``. ``first``: (N,) bool, the matches of the first fit (default: all)."""
         a = np.asarray(pts_a, dtype=np.float64).reshape(-1, 2)
         b = np.asarray(pts_b, dtype=np.float64).reshape(-1, 2)
-        if len(a) != len(b):
-            raise ValueError(f"pts_a and pts_b differ in length: {len(a)}, {len(b)}")
+        sel = np.ones(len(a), bool) if first is None else np.asarray(first, bool).reshape(-1)
+        if not len(a) == len(b) == len(sel):
+            raise ValueError(
+                f"pts_a, pts_b and first differ in length: {len(a)}, {len(b)}, {len(sel)}"
+            )
         good = np.all(np.isfinite(a), axis=1) & np.all(np.isfinite(b), axis=1)
-        if np.count_nonzero(good) < self.min_matches:
+        if np.count_nonzero(good & sel) < self.min_matches:
             return False
-        self._pairs.append(_Pair(a[good].copy(), b[good].copy()))
+        self._pairs.append(_Pair(a[good].copy(), b[good].copy(), sel[good].copy()))
         return True
 
     def clear(self) -> None:
@@ -214,10 +243,7 @@ def fit_rotation(
     E = _essential(calib)
     xa, xb = homogeneous(pts_a), homogeneous(pts_b)
     Ka_inv, Kb_inv = np.linalg.inv(calib.model_a.K), np.linalg.inv(calib.model_b.K)
-    if fixed_axis is None:
-        basis = np.eye(3)
-    else:
-        basis = np.linalg.svd(np.asarray(fixed_axis, dtype=np.float64)[None])[2][1:].T  # (3, 2)
+    basis = _basis(fixed_axis)
     p0 = np.zeros(basis.shape[1]) if start is None else basis.T @ np.asarray(start)
 
     def fun(p: np.ndarray) -> np.ndarray:
@@ -227,17 +253,96 @@ def fit_rotation(
     return np.asarray(basis @ sol.x)
 
 
+def _basis(fixed_axis: np.ndarray | None) -> np.ndarray:
+    """(3, k): the rotation vectors fitted (k = 3, or 2 normal to ``fixed_axis``)."""
+    if fixed_axis is None:
+        return np.eye(3)
+    return np.asarray(np.linalg.svd(np.asarray(fixed_axis, dtype=np.float64)[None])[2][1:].T)
+
+
 def _essential(calib: StereoCalibration) -> np.ndarray:
     t = np.asarray(calib.t, dtype=np.float64)
     t = t / np.linalg.norm(t)
     return np.array([[0, -t[2], t[1]], [t[2], 0, -t[0]], [-t[1], t[0], 0]]) @ calib.R
 
 
-def _pair_fit(calib: StereoCalibration, pair: _Pair, scale_px: float) -> np.ndarray:
+@dataclass(frozen=True)
+class _PairFit:
+    """One pair's fit: its rotation vector (3,) rad, and the information ``J^T J`` (3, 3,
+    px^2/rad^2) of its n selected matches there."""
+
+    free: np.ndarray
+    info: np.ndarray
+    n: int
+
+
+def refit(
+    calib: StereoCalibration,
+    pts_a: np.ndarray,
+    pts_b: np.ndarray,
+    start: np.ndarray,
+    config: CorrectionConfig,
+    fixed_axis: np.ndarray | None = None,
+    rounds: int = 2,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Refit ``rounds`` times on the matches within ``config.band_px`` (Sampson, px) of the
+    current rotation, from ``start`` (3,). Returns (rotation vector (3,) rad, (N,) bool used)."""
+    E = _essential(calib)
+    xa, xb = homogeneous(pts_a), homogeneous(pts_b)
+    Ka_inv, Kb_inv = np.linalg.inv(calib.model_a.K), np.linalg.inv(calib.model_b.K)
+    omega = np.asarray(start, dtype=np.float64)
+    sel = np.ones(len(xa), bool)
+    for _ in range(rounds):
+        d = np.abs(correction_residuals(omega, E, xa, xb, Ka_inv, Kb_inv))
+        if np.count_nonzero(d < config.band_px) < 5:
+            break
+        sel = d < config.band_px
+        omega = fit_rotation(calib, pts_a[sel], pts_b[sel], config.scale_px, fixed_axis, omega)
+    return omega, sel
+
+
+def information(
+    calib: StereoCalibration, pts_a: np.ndarray, pts_b: np.ndarray, omega: np.ndarray
+) -> np.ndarray:
+    """(3, 3) ``J^T J`` of the Sampson residuals (px) in the rotation vector (rad) at omega."""
+    E = _essential(calib)
+    xa, xb = homogeneous(pts_a), homogeneous(pts_b)
+    Ka_inv, Kb_inv = np.linalg.inv(calib.model_a.K), np.linalg.inv(calib.model_b.K)
+    h = 1e-6
+    J = np.stack(
+        [
+            (
+                correction_residuals(omega + h * e, E, xa, xb, Ka_inv, Kb_inv)
+                - correction_residuals(omega - h * e, E, xa, xb, Ka_inv, Kb_inv)
+            )
+            / (2 * h)
+            for e in np.eye(3)
+        ],
+        axis=1,
+    )
+    return np.asarray(J.T @ J)
+
+
+def _pair_fit(calib: StereoCalibration, pair: _Pair, config: CorrectionConfig) -> _PairFit:
+    """The pair's fits, cached per calibration (object identity)."""
     key = id(calib)
     if key not in pair.fits:
-        pair.fits = {key: fit_rotation(calib, pair.pts_a, pair.pts_b, scale_px)}
-    return pair.fits[key]
+        first = fit_rotation(calib, pair.pts_a[pair.first], pair.pts_b[pair.first], config.scale_px)
+        free, sel = refit(calib, pair.pts_a, pair.pts_b, first, config)
+        info = information(calib, pair.pts_a[sel], pair.pts_b[sel], free)
+        pair.fits = {key: _PairFit(free, info, int(np.count_nonzero(sel)))}
+    fit = pair.fits[key]
+    assert isinstance(fit, _PairFit)
+    return fit
+
+
+def pair_rotations(
+    calib: StereoCalibration, window: CorrectionWindow, config: CorrectionConfig
+) -> np.ndarray:
+    """(n, 3) each pair's own rotation vector of camera b (rad, b's frame), as
+    :func:`estimate_correction` fits them (yaw included): their mean is a window's rotation
+    without the decisions of :func:`estimate_correction` (e.g. a clean sequence's reading)."""
+    return np.array([_pair_fit(calib, p, config).free for p in window.pairs]).reshape(-1, 3)
 
 
 def _coverage(calib: StereoCalibration, pts_b: np.ndarray) -> float:
@@ -249,6 +354,19 @@ def _coverage(calib: StereoCalibration, pts_b: np.ndarray) -> float:
 
 def _observable(v: np.ndarray, weak: np.ndarray) -> np.ndarray:
     return np.asarray(v - np.outer(v @ weak, weak) if v.ndim == 2 else v - (v @ weak) * weak)
+
+
+def _half_widths(
+    fits: np.ndarray, info: np.ndarray, n_matches: int, basis: np.ndarray, config: CorrectionConfig
+) -> np.ndarray:
+    """(3,) 95 % half-widths (deg) of the mean of the (n, 3) per-pair fits (rad): Student's t
+    over the pairs, and the systematic floor in quadrature, for rotations in ``basis`` (3, k)."""
+    n = len(fits)
+    stat = float(student_t.ppf(0.975, n - 1)) * fits.std(axis=0, ddof=1) / np.sqrt(n)
+    sub = basis.T @ info @ basis / max(n_matches, 1)
+    cov = basis @ np.linalg.pinv(sub) @ basis.T
+    sys = config.systematic_px * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return np.asarray(np.degrees(np.sqrt(stat**2 + sys**2)))
 
 
 def estimate_correction(
@@ -267,13 +385,14 @@ def estimate_correction(
             None, f"too few pairs for a correction: {len(pairs)} of {config.min_pairs}"
         )
     weak = weak_rotation_axis(calib)
-    fits = np.array([_pair_fit(calib, p, config.scale_px) for p in pairs])  # (n, 3) rad
-    obs = _observable(fits, weak)
-    med = np.median(obs, axis=0)
-    dev = np.linalg.norm(obs - med, axis=1)
+    pair_fits = [_pair_fit(calib, p, config) for p in pairs]
+    free = np.array([f.free for f in pair_fits])  # (n, 3) rad
+    obs = _observable(free, weak)
+    # the reference is the newest min_pairs pairs' median: pairs from before a change of the
+    # rig are dropped like bad pairs, and the correction follows the rig as it is now
+    dev = np.linalg.norm(obs - np.median(obs[-config.min_pairs :], axis=0), axis=1)
     mad = 1.4826 * float(np.median(dev))
-    limit = config.outlier_sigma * max(mad, np.radians(config.outlier_floor_deg))
-    keep = dev <= limit
+    keep = dev <= config.outlier_sigma * max(mad, np.radians(config.outlier_floor_deg))
     n = int(np.count_nonzero(keep))
     if n < config.min_pairs:
         return CorrectionResult(
@@ -281,20 +400,29 @@ def estimate_correction(
             f"too few consistent pairs for a correction: {n} of {len(pairs)} agree "
             f"(need {config.min_pairs})",
         )
-    kept = [p for p, k in zip(pairs, keep, strict=True) if k]
-    pa = np.concatenate([p.pts_a for p in kept])
-    pb = np.concatenate([p.pts_b for p in kept])
-    coverage = _coverage(calib, pb)
+    kept = [f for f, k in zip(pair_fits, keep, strict=True) if k]
+    coverage = _coverage(
+        calib, np.concatenate([p.pts_b for p, k in zip(pairs, keep, strict=True) if k])
+    )
     if coverage < config.min_coverage:
         return CorrectionResult(
             None,
             f"degenerate window: the matches span {coverage:.0%} of the image "
             f"(need {config.min_coverage:.0%}); no texture over most of it",
         )
-    quantile = float(student_t.ppf(0.975, n - 1))
-    half = np.degrees(quantile * fits[keep].std(axis=0, ddof=1) / np.sqrt(n))
+    info = np.sum([f.info for f in kept], axis=0)
+    n_matches = int(sum(f.n for f in kept))
+    mean = free[keep].mean(axis=0)
+    half = _half_widths(free[keep], info, n_matches, np.eye(3), config)
     weak_index = int(np.argmax(np.abs(weak)))
     strong = [i for i in range(3) if i != weak_index]
+    yaw_free = float(np.degrees(mean @ weak))
+    yaw_half = float(half[weak_index])
+    yaw_determined = yaw_half <= config.yaw_max_interval_deg and abs(yaw_free) > yaw_half
+    # yaw is fitted with the others (fixing it at zero while the matches show one would bias
+    # roll) but applied only when determined
+    omega = mean if yaw_determined else mean - (mean @ weak) * weak
+    axes = np.degrees(omega)
     if np.any(half[strong] > config.max_interval_deg):
         return CorrectionResult(
             None,
@@ -302,21 +430,16 @@ def estimate_correction(
             f"{np.max(half[strong]):.3f} deg > {config.max_interval_deg} deg: a plane, no "
             "parallax or too little texture?)",
         )
-    free = fit_rotation(calib, pa, pb, config.scale_px, start=np.median(fits[keep], axis=0))
-    yaw_free = float(np.degrees(free @ weak))
-    yaw_half = float(half[weak_index])
-    yaw_determined = yaw_half <= config.yaw_max_interval_deg and abs(yaw_free) > yaw_half
-    omega = free
-    if not yaw_determined:
-        omega = fit_rotation(calib, pa, pb, config.scale_px, fixed_axis=weak, start=free)
-    axes = np.degrees(omega)
-    significant = np.abs(axes[strong]) > half[strong]
-    if not np.any(significant) and not yaw_determined:
+    observable = float(np.linalg.norm(axes[strong]))
+    figures = (
+        f"pitch {axes[0]:+.3f} +- {half[0]:.3f}, roll {axes[2]:+.3f} +- {half[2]:.3f} deg, "
+        f"yaw {yaw_free:+.3f} +- {yaw_half:.3f} deg"
+    )
+    if not yaw_determined and (
+        observable < config.min_correction_deg or not np.any(np.abs(axes[strong]) > half[strong])
+    ):
         return CorrectionResult(
-            None,
-            "no correction needed: the matches agree with the calibration within their "
-            f"interval (pitch {axes[0]:+.3f} +- {half[0]:.3f}, roll {axes[2]:+.3f} +- "
-            f"{half[2]:.3f} deg)",
+            None, f"no correction needed: the matches agree with the calibration ({figures})"
         )
     dR = Rotation.from_rotvec(omega).as_matrix()
     correction = RigCorrection(
@@ -326,13 +449,11 @@ def estimate_correction(
         half,
         yaw_determined,
         n,
-        len(pa),
+        n_matches,
         yaw_free,
     )
-    yaw_text = "corrected" if yaw_determined else "kept"
     return CorrectionResult(
         correction,
-        f"corrected from {n} pairs ({len(pa)} matches, {len(pairs) - n} dropped): pitch "
-        f"{axes[0]:+.3f} +- {half[0]:.3f}, roll {axes[2]:+.3f} +- {half[2]:.3f} deg, yaw "
-        f"{yaw_free:+.3f} +- {yaw_half:.3f} deg {yaw_text}",
+        f"corrected from {n} pairs ({n_matches} matches, {len(pairs) - n} dropped): {figures} "
+        + ("corrected" if yaw_determined else "kept at the calibration"),
     )

@@ -57,8 +57,15 @@ def corrected_models(
     # the rectifying rotations depend on the pose only (distortion changes stereoRectify's P,
     # which is replaced below)
     R1, R2, _, P2 = cv2.stereoRectify(
-        src_a.K, np.zeros(5), src_b.K, np.zeros(5), src_a.size, R, tv.reshape(3, 1),
-        flags=cv2.CALIB_ZERO_DISPARITY, alpha=-1,
+        src_a.K,
+        np.zeros(5),
+        src_b.K,
+        np.zeros(5),
+        src_a.size,
+        R,
+        tv.reshape(3, 1),
+        flags=cv2.CALIB_ZERO_DISPARITY,
+        alpha=-1,
     )[:4]
     # keep the input's rectified intrinsics; the baseline offset along stereoRectify's axis
     P_old_a, P_old_b = model_a.P, model_b.P

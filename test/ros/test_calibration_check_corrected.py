@@ -164,3 +164,24 @@ def test_without_the_flag_nothing_is_written(bags, tmp_path):
     assert r.returncode == 0, r.stdout + r.stderr
     written = sorted(p.name for p in out.iterdir())
     assert written == ["calibration_check.csv", "calibration_check.png"]
+
+
+def test_rectified_input_gets_files_that_rectify_the_rectified_images(shared_data, bags, tmp_path):
+    """The same knocked bag read as rectified images (``-p images:=rectified``): the files
+    describe those images (K = the stale P[:, :3], no distortion) and R, P rectify them again
+    into the corrected rectification. KITTI's images are its rectified ones (R = I), so the
+    ground-truth matches are in those pixels."""
+    out = tmp_path / "out"
+    r = _run(bags["knocked"], out, "-p", "images:=rectified", "--max-pairs", "16")
+    assert r.returncode == 1, r.stdout + r.stderr
+    summary = json.loads((out / "correction.json").read_text())
+    assert summary["corrected"] is True and summary["images"] == "rectified", summary
+    stale = _stale(shared_data)
+    corrected = tuple(read_camera_yaml(out / f)[1] for f in ("left.yaml", "right.yaml"))
+    for new, old in zip(corrected, stale, strict=True):
+        assert np.array_equal(new.K, old.P[:, :3]) and not np.any(new.D)
+    pl, pr = _ground_truth(shared_data, stale[1].K)
+    before = _vertical_disparity(stale, pl, pr)
+    after = _vertical_disparity(corrected, pl, pr)
+    print(f"rectified input: vertical disparity stale {before:.3f} px, corrected {after:.3f} px")
+    assert before > 4.0 and after < 0.3, (before, after)

@@ -12,7 +12,7 @@ import pytest
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "benchmarks"))
 import bench_self_heal  # noqa: E402
 
-pytestmark = pytest.mark.slow  # about two minutes on 2 cores
+pytestmark = pytest.mark.slow  # half a minute to two minutes on 2 busy cores
 
 
 def test_quick_run_prints_and_writes_docs(shared_data, tmp_path, capsys):

@@ -61,7 +61,9 @@ class CorrectionConfig:
         window: usable pairs whose matches are kept (>= 1).
         min_pairs: pairs needed for a correction (2 <= min_pairs <= window).
         min_matches: matches a pair needs to enter the window.
-        scale_px: soft-L1 scale of the Sampson residuals (px).
+        scale_px: soft-L1 scale of the Sampson residuals (px). The band already drops wrong
+            matches; within it a wider scale is closer to least squares (a 0.2 deg roll knock
+            on KITTI reads 0.135 deg at 1 px, 0.163 deg at 3 px).
         outlier_sigma: a pair whose own rotation is further than this many robust deviations
             (1.4826 MAD, at least ``outlier_floor_deg``) from the window's median is dropped.
         outlier_floor_deg: the smallest deviation (degrees) used for that test.
@@ -84,7 +86,7 @@ class CorrectionConfig:
     window: int = 40
     min_pairs: int = 10
     min_matches: int = 20
-    scale_px: float = 1.0
+    scale_px: float = 3.0
     outlier_sigma: float = 4.0
     outlier_floor_deg: float = 0.02
     max_interval_deg: float = 0.1

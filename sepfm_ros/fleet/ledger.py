@@ -56,7 +56,8 @@ def _rewrite(path: Path, columns: list[str], rows: Iterable[dict[str, Any]]) -> 
 
 
 def _cell(value: Any) -> Any:
-    if isinstance(value, float) and math.isnan(value):
+    """A CSV cell: NaN and None (no value) are empty."""
+    if value is None or (isinstance(value, float) and math.isnan(value)):
         return ""
     return value
 

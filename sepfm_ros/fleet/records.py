@@ -38,6 +38,15 @@ class PairRecord:
             after this pair (total and about the camera x axis), degrees.
         level: the calibration check's decision after this pair (OK, WARN, ERROR, STALE; ""
             without a calibration check).
+        correction_pitch_deg, correction_yaw_deg, correction_roll_deg: the rig's corrected
+            rotation after this pair, about camera b's x (pitch), y (yaw) and z (roll) optical
+            axes, degrees (NaN without a correction; see
+            :mod:`sepfm_ros.geometry.calibrated.correction`).
+        correction_pitch_ci95_deg, ...: half-widths of their 95 % intervals, degrees.
+        correction_yaw_determined: the data determined yaw (else it is the calibration's);
+            None without a correction.
+        correction_pairs: pairs the correction was estimated from (None without one).
+        correction_reason: why a flagged pair has no correction ("" otherwise).
     """
 
     stamp_ns: int
@@ -52,7 +61,29 @@ class PairRecord:
     window_rotation_deg: float = math.nan
     window_rotation_x_deg: float = math.nan
     level: str = ""
+    correction_pitch_deg: float = math.nan
+    correction_yaw_deg: float = math.nan
+    correction_roll_deg: float = math.nan
+    correction_pitch_ci95_deg: float = math.nan
+    correction_yaw_ci95_deg: float = math.nan
+    correction_roll_ci95_deg: float = math.nan
+    correction_yaw_determined: bool | None = None
+    correction_pairs: int | None = None
+    correction_reason: str = ""
 
+
+#: the correction's columns, the same in pairs.csv and bags.csv
+CORRECTION_FIELDS = (
+    "correction_pitch_deg",
+    "correction_yaw_deg",
+    "correction_roll_deg",
+    "correction_pitch_ci95_deg",
+    "correction_yaw_ci95_deg",
+    "correction_roll_ci95_deg",
+    "correction_yaw_determined",
+    "correction_pairs",
+    "correction_reason",
+)
 
 PAIR_FIELDS = [f.name for f in fields(PairRecord)]
 
@@ -183,7 +214,11 @@ def drift_start(pairs: list[PairRecord], first_flag: int, warn_deg: float) -> in
 
 @dataclass
 class BagRow:
-    """One row of the fleet table (``bags.csv``): a bag of a rig and its answer."""
+    """One row of the fleet table (``bags.csv``): a bag of a rig and its answer.
+
+    The ``correction_*`` columns are those of the bag's last corrected pair when the bag was
+    flagged (WARN or ERROR; :func:`bag_correction`), empty otherwise.
+    """
 
     rig_id: str
     rig: str
@@ -210,6 +245,15 @@ class BagRow:
     first_flagged_s: float = math.nan
     drift_start_utc: str = ""
     drift_start_s: float = math.nan
+    correction_pitch_deg: float = math.nan
+    correction_yaw_deg: float = math.nan
+    correction_roll_deg: float = math.nan
+    correction_pitch_ci95_deg: float = math.nan
+    correction_yaw_ci95_deg: float = math.nan
+    correction_roll_ci95_deg: float = math.nan
+    correction_yaw_determined: bool | None = None
+    correction_pairs: int | None = None
+    correction_reason: str = ""
     slices: int = 0
     key: str = ""
     extra: dict[str, Any] = field(default_factory=dict, repr=False)
@@ -261,7 +305,21 @@ def bag_row(
             row.first_flagged_s = (pairs[first].log_time_ns - info.start_ns) / 1e9
             row.drift_start_utc = _iso(pairs[start].stamp_ns)
             row.drift_start_s = (pairs[start].log_time_ns - info.start_ns) / 1e9
+            for name, value in bag_correction(pairs).items():
+                setattr(row, name, value)
     return row
+
+
+def bag_correction(pairs: list[PairRecord]) -> dict[str, Any]:
+    """The correction columns of a flagged bag: those of its last pair with a correction
+    (the estimate from the most pairs, at the end of the drift), else the reason its last
+    flagged pair gave (``correction_reason``; the rotation columns stay empty)."""
+    corrected = [p for p in pairs if p.correction_pairs]
+    if corrected:
+        return {name: getattr(corrected[-1], name) for name in CORRECTION_FIELDS}
+    flagged = [p for p in pairs if p.level in FLAG_LEVELS]
+    reason = flagged[-1].correction_reason if flagged else ""
+    return {"correction_reason": reason or "no correction estimated"}
 
 
 def failed_row(

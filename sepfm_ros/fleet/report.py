@@ -127,11 +127,23 @@ def plot_rig(rig: RigSummary, path: Path, thresholds: Thresholds) -> None:
     plt.close(fig)
 
 
+def _correction_text(row: dict[str, str]) -> str:
+    """A flagged bag's corrected rotation with its 95 % interval, or why there is none."""
+    if not row.get("correction_pairs"):
+        return row.get("correction_reason", "").replace("|", "/")
+    parts = []
+    for axis in ("pitch", "yaw", "roll"):
+        value, half = _f(row[f"correction_{axis}_deg"]), _f(row[f"correction_{axis}_ci95_deg"])
+        parts.append(f"{axis} {value:+.3f} ± {half:.3f}")
+    kept = "" if row.get("correction_yaw_determined") == "True" else ", yaw kept"
+    return f"{', '.join(parts)} ({row['correction_pairs']} pairs{kept})"
+
+
 def _bag_table(rig: RigSummary) -> list[str]:
     lines = [
         "| bag | start (UTC) | s | pairs | with F | median inliers | inlier error (px) | "
-        "rotation drift (deg) | worst | drift starts | first flagged |",
-        "|---|---|---:|---:|---:|---:|---:|---:|---|---|---|",
+        "rotation drift (deg) | worst | drift starts | first flagged | correction (deg) |",
+        "|---|---|---:|---:|---:|---:|---:|---:|---|---|---|---|",
     ]
     for r in rig.rows:
         start = f"{r['drift_start_utc']} ({_fmt(_f(r['drift_start_s']), 1)} s in)"
@@ -141,7 +153,7 @@ def _bag_table(rig: RigSummary) -> list[str]:
             f"{r['pairs']} | {r['pairs_with_f']} | {_fmt(_f(r['median_inliers']), 0)} | "
             f"{_fmt(_f(r['median_inlier_error_px']), 2)} | {_fmt(_f(r['rotation_drift_deg']))} "
             f"| {r['worst_level'] or '-'} | {start if r['drift_start_utc'] else ''} | "
-            f"{flag if r['first_flagged_utc'] else ''} |"
+            f"{flag if r['first_flagged_utc'] else ''} | {_correction_text(r)} |"
         )
     return lines
 

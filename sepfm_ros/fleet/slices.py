@@ -3,11 +3,12 @@
 A slice owns the pairs completed (by the log time of their second message) in [t0, t1). What a
 pair's answer depends on besides its own two images is carried across a slice boundary by
 state: the stereo pairing's queues (``sync_queue_size`` frames per side), motion's last
-``frame_gap`` frames, and the calibration check's sliding window of ``calibration_window``
-pairs. So a slice reads from ``read_from = t0 - overlap``, where the overlap holds that many
-frames with margin, pairs those frames as the unsliced run does, and runs the answer path on
-the last ``calibration_window`` pairs before t0 to fill the window (their answers are
-dropped; the slice before owns them). Pairs earlier than that are only paired, not estimated.
+``frame_gap`` frames, the calibration check's sliding window of ``calibration_window``
+pairs and the correction's window of ``correction_window`` pairs. So a slice reads from
+``read_from = t0 - overlap``, where the overlap holds that many frames with margin, pairs those
+frames as the unsliced run does, and runs the answer path on the last pairs before t0 that the
+longer of the two windows holds, to fill them (their answers are dropped; the slice before owns
+them). Pairs earlier than that are only paired, not estimated.
 The equality is tested (``test/fleet/test_audit.py``).
 """
 
@@ -23,8 +24,9 @@ PERIOD_SLACK = 1.5
 
 
 def warm_pairs(params: dict[str, Any]) -> int:
-    """Pairs a slice runs the answer path on before t0: the calibration check's window."""
-    return int(params["calibration_window"])
+    """Pairs a slice runs the answer path on before t0: the longer of the calibration check's
+    window and the correction's."""
+    return max(int(params["calibration_window"]), int(params.get("correction_window", 0)))
 
 
 def overlap_ns(params: dict[str, Any], period_ns: int, slop_ns: int | None) -> int:

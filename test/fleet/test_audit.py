@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -37,6 +38,17 @@ RIGS = [
 ]
 FRAMES = 20
 PERIOD_S = 0.1
+CORRECTION = [
+    "correction_pitch_deg",
+    "correction_yaw_deg",
+    "correction_roll_deg",
+    "correction_pitch_ci95_deg",
+    "correction_yaw_ci95_deg",
+    "correction_roll_ci95_deg",
+    "correction_yaw_determined",
+    "correction_pairs",
+    "correction_reason",
+]
 
 
 def _audit(*args: str, timeout: float = 900) -> subprocess.CompletedProcess:
@@ -119,6 +131,9 @@ def test_report_flags_exactly_the_drifted_rigs_where_the_drift_starts(fleet, aud
                 assert float(row["first_flagged_s"]) >= float(row["drift_start_s"])
             if not b.drifted:
                 assert row["worst_level"] == "OK" and row["first_flagged_s"] == "", row
+                assert all(row[c] == "" for c in CORRECTION), row  # no correction columns
+            else:
+                _assert_corrected(row, FRAMES - (b.drift_frame or 0))
     # the first flag of each drifted rig is in the bag where its drift started
     for name in ("robot_b", "robot_d"):
         flags = [by_bag[str(b.path)] for b in by_rig[name]]
@@ -141,6 +156,21 @@ def test_report_flags_exactly_the_drifted_rigs_where_the_drift_starts(fleet, aud
     assert len(pngs) == len(RIGS) + 2 and all(p.read_bytes()[:4] == b"\x89PNG" for p in pngs)
     pairs = _rows(out, "pairs.csv")
     assert len(pairs) == sum(int(row["pairs"]) for row in rows)
+    assert "| correction (deg) |" in report
+    assert re.search(r"pitch [+-]0\.(4[789]|5[0123]).* pairs", report), report  # the knock
+
+
+def _assert_corrected(row: dict[str, str], knocked_pairs: int) -> None:
+    """A flagged bag's correction columns: the pitch knock (0.5 deg) with its interval when
+    the bag ends with a correction; else the reason. A bag knocked for all its pairs has one."""
+    if row["correction_pairs"] == "":
+        assert knocked_pairs < FRAMES and row["correction_reason"], row
+        assert row["correction_pitch_deg"] == "", row
+        return
+    assert 10 <= int(row["correction_pairs"]) <= knocked_pairs, row
+    assert abs(abs(float(row["correction_pitch_deg"])) - 0.5) < 0.03, row
+    assert 0 < float(row["correction_pitch_ci95_deg"]) < 0.1, row
+    assert row["correction_yaw_determined"] in ("True", "False"), row
 
 
 def test_rerun_skips_done_bags_and_force_redoes_them(fleet, audited):
@@ -179,6 +209,8 @@ def test_slices_give_the_unsliced_answers(shared_data, tmp_path):
     assert sliced == whole  # every pair, every figure, every decision
     assert [p["level"] for p in whole].count("OK") >= 10  # the window spans slice boundaries
     assert {p["level"] for p in whole[30:]} <= {"WARN", "ERROR"}
+    assert whole[-1]["correction_pairs"]  # the correction's window spans them too
+    assert runs["0"][0][0]["correction_pitch_deg"] == runs["0.8"][0][0]["correction_pitch_deg"]
 
 
 def _start(cmd: list[str], log: Path) -> subprocess.Popen:

@@ -11,9 +11,17 @@ from ground_truth import REPO_ROOT
 
 from sepfm_ros.fleet.discovery import find_bags
 from sepfm_ros.fleet.ledger import BAGS_CSV, PAIRS_CSV, DuplicateRowError, Ledger
-from sepfm_ros.fleet.records import BagRow, PairRecord, drift_start
+from sepfm_ros.fleet.records import (
+    ROW_FIELDS,
+    BagInfo,
+    BagRow,
+    PairRecord,
+    Thresholds,
+    bag_row,
+    drift_start,
+)
 from sepfm_ros.fleet.rigs import RigPatternError, compile_pattern, naming_conflicts, rig_name
-from sepfm_ros.fleet.slices import overlap_ns, plan_slices
+from sepfm_ros.fleet.slices import overlap_ns, plan_slices, warm_pairs
 from sepfm_ros.ros.session.parameters import PARAMS
 
 
@@ -57,6 +65,9 @@ def test_slices_cover_the_bag_once():
     # the overlap holds the window, the pairing queue and the frame gap, in frame periods
     frames = params["calibration_window"] + params["sync_queue_size"] + params["frame_gap"]
     assert overlap_ns(params, 10**8, 0) >= frames * 10**8
+    # and the correction's window when it is the longer one (40 pairs against 10)
+    assert warm_pairs(params) == max(params["calibration_window"], params["correction_window"])
+    assert warm_pairs({**params, "correction_window": 40, "calibration_window": 10}) == 40
 
 
 def test_rig_names_from_paths_and_conflicts():
@@ -103,6 +114,55 @@ def test_ledger_one_row_per_bag_and_resume(tmp_path):
     assert not forced.done("/bags/a", "k1") and forced.pairs() == []
     with (out / BAGS_CSV).open() as f:
         assert list(csv.DictReader(f)) == []
+
+
+def _info() -> BagInfo:
+    return BagInfo("/bags/a", "stereo", ("/l", "/r"), True, (), 0, 10**9, 10**8, 0, 10, (10, 10))
+
+
+def _corrected(k: int, level: str, pitch: float | None, reason: str = "") -> PairRecord:
+    fix = {}
+    if pitch is not None:
+        fix = dict(correction_pitch_deg=pitch, correction_yaw_deg=0.0, correction_roll_deg=0.01,
+                   correction_pitch_ci95_deg=0.004, correction_yaw_ci95_deg=0.06,
+                   correction_roll_ci95_deg=0.01, correction_yaw_determined=False,
+                   correction_pairs=k)  # fmt: skip
+    return PairRecord(k, k, "ok", True, 100, 80, 0.3, 0.5, 1.0, 0.5, 0.5, level,
+                      correction_reason=reason, **fix)  # fmt: skip
+
+
+def test_flagged_bag_row_has_its_last_correction_a_held_one_none(tmp_path):
+    th = Thresholds()
+    pairs = [_corrected(k, "OK", None) for k in range(3)]
+    pairs += [_corrected(3, "WARN", None, "too few pairs for a correction: 1 of 10")]
+    pairs += [_corrected(k, "ERROR", 0.49 + k / 1000) for k in range(10, 13)]
+    row = bag_row(_info(), pairs, "rig", "rig", "", "k", 1, th)
+    assert row.correction_pitch_deg == pytest.approx(0.502) and row.correction_pairs == 12
+    assert row.correction_reason == ""
+    row = bag_row(_info(), pairs[:4], "rig", "rig", "", "k", 1, th)  # flagged, no correction
+    assert math.isnan(row.correction_pitch_deg) and row.correction_pairs is None
+    assert row.correction_reason == "too few pairs for a correction: 1 of 10"
+    held = bag_row(_info(), pairs[:3], "rig", "rig", "", "k", 1, th)
+    assert held.worst_level == "OK" and held.correction_reason == ""
+    ledger = Ledger.open(tmp_path)
+    ledger.write(held, pairs[:3])
+    with (tmp_path / BAGS_CSV).open() as f:
+        cells = next(csv.DictReader(f))
+    assert all(cells[c] == "" for c in ROW_FIELDS if c.startswith("correction_")), cells
+    assert all(v != "None" for v in ledger.rows["/bags/a"].values())
+
+
+def test_a_ledger_written_before_the_correction_columns_reads(tmp_path):
+    old = [c for c in ROW_FIELDS if not c.startswith("correction_")]
+    with (tmp_path / BAGS_CSV).open("w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=old)
+        w.writeheader()
+        w.writerow({c: "" for c in old} | {"bag": "/bags/old", "state": "done", "key": "k0"})
+    ledger = Ledger.open(tmp_path)
+    assert ledger.done("/bags/old", "k0")
+    with (tmp_path / BAGS_CSV).open() as f:
+        rows = list(csv.DictReader(f))
+    assert rows[0]["bag"] == "/bags/old" and rows[0]["correction_pitch_deg"] == ""
 
 
 def _stream_no_ros():

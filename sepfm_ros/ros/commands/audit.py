@@ -11,10 +11,11 @@ into time slices that run in parallel and give the same answers as one pass.
 
 OUT gets ``bags.csv`` (a row per bag: rig, time span, topics, pairs, pairs with F, inlier error,
 rotation drift against the calibration, worst decision, when the drift starts and when it was
-flagged; a bag that cannot be read gets a row with the reason), ``pairs.csv`` (every pair) and
-``report.md`` with a drift plot per rig, flagged rigs first. Rows are written by this process as
-bags finish; running the same command again skips the bags done (same bag files, parameters
-and version) unless ``--force``.
+flagged, and for a flagged bag the corrected rotation (pitch, yaw, roll, degrees) with its 95 %
+interval, or why there is none; a bag that cannot be read gets a row with the reason),
+``pairs.csv`` (every pair) and ``report.md`` with a drift plot per rig, flagged rigs first. Rows
+are written by this process as bags finish; running the same command again skips the bags done
+(same bag files, parameters and version) unless ``--force``.
 
 Exit codes: 0 every bag answered and no rig flagged; 1 a rig flagged (WARN or ERROR) or a bag
 without an answer; 2 bad arguments or no engine; 130 interrupted (rows written so far stay).

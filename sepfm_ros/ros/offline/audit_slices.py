@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from sepfm_ros.fleet.records import (
+    FLAG_LEVELS,
     BagInfo,
     CameraIdentity,
     InputChoice,
@@ -146,6 +147,28 @@ class _From:
         return self.reader.messages(topics, start)
 
 
+def _correction(answer: PairAnswer, level: str) -> dict[str, Any]:
+    """The correction fields of a pair's record: the rig's correction after the pair, or why a
+    flagged pair has none."""
+    result = answer.calibrated.correction if answer.calibrated is not None else None
+    if result is None:
+        return {}
+    fix = result.correction
+    if fix is None:
+        return {"correction_reason": result.reason if level in FLAG_LEVELS else ""}
+    axes, half = (tuple(float(v) for v in a) for a in (fix.axes_deg, fix.interval_deg))
+    return {
+        "correction_pitch_deg": axes[0],
+        "correction_yaw_deg": axes[1],
+        "correction_roll_deg": axes[2],
+        "correction_pitch_ci95_deg": half[0],
+        "correction_yaw_ci95_deg": half[1],
+        "correction_roll_ci95_deg": half[2],
+        "correction_yaw_determined": bool(fix.yaw_determined),
+        "correction_pairs": int(fix.n_pairs),
+    }
+
+
 def pair_record(job: PairJob, answer: PairAnswer) -> PairRecord:
     """The audit's figures of one pair, read from the node's answer for it."""
     est = answer.estimate
@@ -172,6 +195,7 @@ def pair_record(job: PairJob, answer: PairAnswer) -> PairRecord:
         window_rot,
         window_x,
         level,
+        **_correction(answer, level),
     )
 
 

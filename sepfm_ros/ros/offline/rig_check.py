@@ -1,6 +1,7 @@
 """Is a stereo rig still calibrated? A bag's pairs through the session and the calibration
 check's sliding window, with the per-pair figures as CSV and a plot (``calibration_check``'s
-library)."""
+library). :func:`check_bag` also returns the correction after the last pair and the camera_info
+models of the corrected rig (:mod:`sepfm_ros.ros.offline.corrected_files` writes them)."""
 
 from __future__ import annotations
 
@@ -18,7 +19,8 @@ from sepfm_ros.geometry.calibrated.calibration_check import (
     MonitorConfig,
     PairCheck,
 )
-from sepfm_ros.geometry.calibrated.camera import CalibrationError
+from sepfm_ros.geometry.calibrated.camera import CalibrationError, CameraModel
+from sepfm_ros.geometry.calibrated.correction import CorrectionResult
 from sepfm_ros.ros.bags.errors import BagError
 from sepfm_ros.ros.bags.inputs import detect_inputs
 from sepfm_ros.ros.bags.pairing import (
@@ -33,8 +35,9 @@ from sepfm_ros.ros.offline.stream import BagStream, stereo_slop_ns
 
 @dataclass
 class PairRow:
-    """One checked pair: its stamp, figures and the monitor's decision after it, and the
-    pair's answer (``F``: 3x3 in the answer's coordinates, None without F; ``inliers``)."""
+    """One checked pair: its stamp, figures and the monitor's decision after it, the pair's
+    answer (``F``: 3x3 in the answer's coordinates, None without F; ``inliers``) and the rig's
+    correction after it (None: the session gave none)."""
 
     index: int
     stamp_ns: int
@@ -42,6 +45,30 @@ class PairRow:
     status: CalibrationStatus
     F: np.ndarray | None = None
     inliers: int = 0
+    correction: CorrectionResult | None = None
+
+
+@dataclass
+class CheckRun:
+    """A checked bag: its pairs and what the check ends with.
+
+    Attributes:
+        rows: the checked pairs, in order.
+        topics: (left, right) image topics; info_topics: their camera_info topics.
+        frames: (left, right) frame ids of the last camera_info (the cameras' names).
+        rectified: the images are rectified (``image_rect``).
+        correction: the correction after the last pair (None: no pair was checked).
+        corrected: camera_info models (left, right) of the corrected rig, None without a
+            correction (:meth:`~sepfm_ros.pipeline.calibration.StreamCalibration.corrected_models`).
+    """
+
+    rows: list[PairRow]
+    topics: tuple[str, str]
+    info_topics: tuple[str, str]
+    frames: tuple[str, str] = ("", "")
+    rectified: bool = False
+    correction: CorrectionResult | None = None
+    corrected: tuple[CameraModel, CameraModel] | None = None
 
 
 @dataclass(frozen=True)
@@ -77,8 +104,11 @@ def _missing_info(reader: BagReader, bag: str, topics: tuple[str, str]) -> Calib
     return None
 
 
-def _open(reader: BagReader, req: CheckRequest, out: TextIO) -> tuple[BagStream, int]:
-    """The bag's stereo stream with its camera_info, and how many pairs to check."""
+def _open(
+    reader: BagReader, req: CheckRequest, out: TextIO
+) -> tuple[BagStream, int, tuple[str, str]]:
+    """The bag's stereo stream with its camera_info, how many pairs to check and the
+    camera_info topics."""
     spec = detect_inputs(reader, "stereo", req.left, req.right)
     left, right = spec.topics
     infos = (
@@ -105,19 +135,19 @@ def _open(reader: BagReader, req: CheckRequest, out: TextIO) -> tuple[BagStream,
     )
     for line in inputs.warnings(req.values["stamp_jump_reset_s"]):
         print(line, file=out)
-    return stream, total
+    return stream, total, infos
 
 
-def run_check(
+def check_bag(
     req: CheckRequest, out: TextIO = sys.stdout, stop: Callable[[], None] | None = None
-) -> list[PairRow]:
-    """Check every stereo pair of the bag through the session (the node's answer and its
-    calibration monitor); print progress and figures. Raises BagError, CalibrationError or
-    ParameterError on bad input; ``stop`` is called before each pair (it raises
-    KeyboardInterrupt when a stop was requested)."""
+) -> CheckRun:
+    """Check every stereo pair of the bag through the session (the node's answer, its
+    calibration monitor and correction); print progress and figures. Raises BagError,
+    CalibrationError or ParameterError on bad input; ``stop`` is called before each pair (it
+    raises KeyboardInterrupt when a stop was requested)."""
     rows: list[PairRow] = []
     with BagReader(req.bag) as reader:
-        stream, total = _open(reader, req, out)
+        stream, total, infos = _open(reader, req, out)
         for job in stream.pairs():
             if stop is not None:
                 stop()
@@ -127,7 +157,27 @@ def run_check(
                 print(_row_line(row, total), file=out, flush=True)
             if len(rows) >= total:
                 break
-    return rows
+        run = CheckRun(rows, stream.spec.topics, infos, rectified=stream.session.rectified)
+        if rows:
+            run.frames = _frames(stream, rows[-1].stamp_ns)
+            run.correction = rows[-1].correction
+            run.corrected = stream.session.calibrated.calibration.corrected_models()
+    return run
+
+
+def run_check(
+    req: CheckRequest, out: TextIO = sys.stdout, stop: Callable[[], None] | None = None
+) -> list[PairRow]:
+    """The checked pairs of :func:`check_bag`."""
+    return check_bag(req, out, stop).rows
+
+
+def _frames(stream: BagStream, stamp: int) -> tuple[str, str]:
+    """Frame ids of the camera_info in use at ``stamp`` (ns), left and right."""
+    if stream.infos is None:
+        return ("", "")
+    left, right = stream.infos.at(stamp)[:2]
+    return (str(left.header.frame_id), str(right.header.frame_id))
 
 
 def _check_one(stream: BagStream, job: PairJob, index: int, out: TextIO) -> PairRow | None:
@@ -151,7 +201,13 @@ def _check_one(stream: BagStream, job: PairJob, index: int, out: TextIO) -> Pair
         raise CalibrationError(problem or "no calibrated stereo rig")
     F = np.reshape(answer.estimate.f, (3, 3)) if answer.has_f else None
     return PairRow(
-        index, stamp, calibrated.check, calibrated.status, F, int(answer.estimate.inliers)
+        index,
+        stamp,
+        calibrated.check,
+        calibrated.status,
+        F,
+        int(answer.estimate.inliers),
+        calibrated.correction,
     )
 
 
@@ -163,14 +219,42 @@ def _row_line(row: PairRow, total: int) -> str:
         if c.usable
         else f"inliers {c.n_inliers:4d}  (too few to measure)"
     )
+    fix = row.correction.correction if row.correction is not None else None
+    corrected = (
+        ""
+        if fix is None
+        else f"  corrected pitch {fix.axes_deg[0]:+.3f} roll {fix.axes_deg[2]:+.3f} deg"
+        f" ({fix.n_pairs} pairs)"
+    )
     return (
         f"[{row.index + 1}/{total}] {format_stamp(row.stamp_ns)}  {figures}  "
-        f"-> {row.status.level_name}"
+        f"-> {row.status.level_name}{corrected}"
     )
 
 
+#: per-pair CSV columns of the running correction (empty without one)
+CORRECTION_COLUMNS = [
+    "correction_pitch_deg",
+    "correction_yaw_deg",
+    "correction_roll_deg",
+    "correction_pitch_ci95_deg",
+    "correction_yaw_ci95_deg",
+    "correction_roll_ci95_deg",
+    "correction_pairs",
+]
+
+
+def _correction_cells(result: CorrectionResult | None) -> list[Any]:
+    fix = result.correction if result is not None else None
+    if fix is None:
+        return [""] * len(CORRECTION_COLUMNS)
+    return [*fix.axes_deg.tolist(), *fix.interval_deg.tolist(), fix.n_pairs]
+
+
 def write_csv(rows: list[PairRow], path: Path) -> None:
-    """One line per pair: figures and the decision after it."""
+    """One line per pair: figures, the decision after it and the correction after it
+    (degrees about camera b's x, y, z axes, 95 % half-widths, pairs used; empty without
+    one)."""
     with path.open("w", newline="") as f:
         w = csv.writer(f)
         w.writerow(
@@ -185,6 +269,7 @@ def write_csv(rows: list[PairRow], path: Path) -> None:
                 "rotation_y_deg",
                 "rotation_z_deg",
                 "level",
+                *CORRECTION_COLUMNS,
             ]
         )
         for r in rows:
@@ -192,6 +277,7 @@ def write_csv(rows: list[PairRow], path: Path) -> None:
             w.writerow(
                 [r.index, r.stamp_ns, c.n_inliers, c.epipolar_median_px, c.epipolar_p90_px]
                 + [c.rotation_error_deg, *c.rotation_axes_deg.tolist(), r.status.level_name]
+                + _correction_cells(r.correction)
             )
 
 

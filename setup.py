@@ -117,6 +117,7 @@ setup(
         "test": [
             "pytest>=7",
             "hypothesis>=6",
+            "PyYAML>=6",  # a YAML 1.1 reader, as camera_info_manager's yaml-cpp (test_camera_yaml)
             "ruff==0.17.6",  # pinned: lint and format rules change between releases
             "mypy==2.4.1",  # pinned: new releases add checks ([tool.mypy] in pyproject.toml)
             "colcon-core",

@@ -292,6 +292,7 @@ def probe_main(out: Path) -> None:
     write them to ``out``."""
     import rclpy
     from diagnostic_msgs.msg import DiagnosticArray
+    from rclpy.executors import ExternalShutdownException
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
     from sepfm_msgs.msg import TwoViewEstimate
@@ -320,7 +321,7 @@ def probe_main(out: Path) -> None:
     node.create_subscription(DiagnosticArray, "/diagnostics", on_diagnostics, qos)
     try:
         rclpy.spin(node)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, ExternalShutdownException):  # SIGINT: either, by its timing
         pass
     out.write_text(json.dumps({"answers": {str(k): v for k, v in answers.items()}, **state}))
 

@@ -115,6 +115,7 @@ ROSDISTRO_KEYS = {
     "python3-ruamel.yaml",
     "python3-pytest",
     "python3-hypothesis",
+    "python3-yaml",
 }
 # Keys rosdistro has whose Ubuntu rule lists only older releases: unresolvable on Jazzy.
 ROSDISTRO_KEYS_NOT_ON_NOBLE = {"python3-numba"}
@@ -137,6 +138,7 @@ MODULE_KEYS = {
     "dask": "python3-distributed-pip",
     "pytest": "python3-pytest",
     "hypothesis": "python3-hypothesis",
+    "yaml": "python3-yaml",
     **{name: name for name in JAZZY_PACKAGES | set(WORKSPACE_PACKAGES)},
 }
 # Imported only where present; the code and tests say so when it is missing.

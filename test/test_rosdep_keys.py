@@ -60,6 +60,7 @@ ROSDISTRO_UBUNTU = {
     "python3-rosbags-pip": {"pip": {"packages": ["rosbags"]}},
     "python3-pytest": ["python3-pytest"],
     "python3-hypothesis": ["python3-hypothesis"],
+    "python3-yaml": ["python3-yaml"],
 }
 
 

@@ -52,6 +52,17 @@ def kitti_rig() -> StereoCalibration:
     return StereoCalibration.from_models(ma, mb, rectified=True)
 
 
+def kitti_frames(n_frames: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The first ``n_frames`` (left, right) grey frames of kitti_seq2."""
+    return [
+        tuple(
+            cv2.imread(str(DATA / f"kitti_seq2/{s}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE)
+            for s in ("left", "right")
+        )
+        for k in range(n_frames)
+    ]
+
+
 def run_case(pipe, calib, images, axis, deg, change, config):
     """Levels and checks of one sequence; the right image rotated from pair ``change`` on."""
     rv = np.zeros(3)
@@ -82,13 +93,7 @@ def main(argv: list[str] | None = None) -> int:
     a = p.parse_args(argv)
     config = MonitorConfig()
     calib = kitti_rig()
-    images = [
-        tuple(
-            cv2.imread(str(DATA / f"kitti_seq2/{s}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE)
-            for s in ("left", "right")
-        )
-        for k in range(FRAMES)
-    ]
+    images = kitti_frames(FRAMES)
     pipe = Pipeline(PipelineConfig(), cache_size=FRAMES)
     t0 = time.perf_counter()
     clean_levels, clean_checks = run_case(pipe, calib, images, None, 0.0, a.change, config)

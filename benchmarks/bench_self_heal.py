@@ -39,7 +39,7 @@ from scipy.spatial.transform import Rotation
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import bench_docs  # noqa: E402
-from bench_calibration_check import DATA, kitti_rig  # noqa: E402
+from bench_calibration_check import kitti_frames, kitti_rig  # noqa: E402
 
 from sepfm_ros.geometry.calibrated.calibration_check import (  # noqa: E402
     ERROR,
@@ -94,13 +94,7 @@ class Pair:
 
 def kitti(n_frames: int) -> Rig:
     calib = kitti_rig()
-    frames = [
-        tuple(
-            cv2.imread(str(DATA / f"kitti_seq2/{s}/{k:06d}.png"), cv2.IMREAD_GRAYSCALE)
-            for s in ("left", "right")
-        )
-        for k in range(n_frames)
-    ]
+    frames = kitti_frames(n_frames)
     K = calib.model_b.K
 
     def images(k: int, dR: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

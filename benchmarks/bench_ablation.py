@@ -14,8 +14,10 @@ Sets (threshold 1 px, confidence 0.99):
 Printed per set and configuration: mean F-score against the GT positives, success % (median
 GT-positive error < 1 px and >= 20 positives recovered), median hypotheses, median ms per pair,
 median ms over USAC_MAGSAC's (same run), and the line search's median ms per pair (the separable
-methods' ``Estimate.timings_ms["lines"]``: Hough lines in both images and the ranked line pairs)
-and its share of the configuration's median ms.
+methods' ``Estimate.timings_ms["lines"]``: Hough lines in both images and the ranked line pairs,
+over the pairs that ran it) and its share of the configuration's median ms, the share of pairs
+whose line search the escape kept and of pairs answered from a line pair, and per set the line
+search's cost in hypotheses of ransac7's loop (what ``separable.escape`` weighs).
 
     python benchmarks/bench_ablation.py [--sets lines,shared] [--step 4] [--seed 0]
         [--write-docs]
@@ -40,6 +42,7 @@ from sepfm_ros.evaluation.methods import REGISTRY, poselib_available, superansac
 from sepfm_ros.evaluation.metrics import positives, run_metrics
 from sepfm_ros.geometry import DEFAULT_METHOD, estimate_fundamental
 from sepfm_ros.geometry.compiled import warm_up as warm_up_geometry
+from sepfm_ros.geometry.separable.escape import LINE_SEARCH_HYPOTHESES
 
 REPO = Path(__file__).resolve().parent.parent
 SHARED = REPO.parent / "shared"
@@ -76,6 +79,7 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "in-sample plane check on": (None, {"sample_plane_check": True}),
     "final Sampson refinement off": (None, {"refine": False}),
     "final LM polish of noisy matches off": (None, {"final_polish": False}),
+    "escape off (line search on every pair)": (None, {"line_search_escape": False}),
     "periodic line-pair check on": (None, {"periodic_check": True}),
     "shifted-plane check off": (None, {"shifted_plane_check": False}),
     "all framework components above off": (None, FRAMEWORK_OFF),
@@ -83,6 +87,8 @@ CONFIGS: dict[str, tuple[str | None, dict]] = {
     "ransac7: separable part off (default options)": ("ransac7", {}),
     "ransac7, framework components off": ("ransac7", FRAMEWORK_OFF),
 }
+ESCAPE_OFF = "escape off (line search on every pair)"
+RANSAC7 = "ransac7: separable part off (default options)"
 ANCHORS = ["cv-magsac", "cv-accurate"] + (["poselib"] if poselib_available() else [])
 ANCHORS += superansac_methods()
 
@@ -93,7 +99,7 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
     pairs = pairs[::step]
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", ratio))
     labels = [*CONFIGS, *ANCHORS]
-    rows: dict[str, list[tuple[bool, float, float, float, float]]] = {k: [] for k in labels}
+    rows: dict[str, list[tuple[float, ...]]] = {k: [] for k in labels}
     t0 = time.time()
     for i, pair in enumerate(pairs):
         m = cache.matches(pair)
@@ -109,13 +115,18 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
                 ms = 1e3 * (time.perf_counter() - t)
                 F, hyp = e.F, float(e.hypotheses)
                 lines_ms = float(e.timings_ms.get("lines", np.nan))
+                separable = (method or DEFAULT_METHOD).startswith("sep")
+                ran = float("lines" in e.timings_ms) if separable else np.nan
+                used = float(e.line_pair is not None) if separable else np.nan
+                loop_ms = e.timings_ms.get("stage2", np.nan) / max(e.hypotheses, 1)
             else:
                 r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
                 F, ms, lines_ms = r.F, r.ms, np.nan
                 hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan
+                ran = used = loop_ms = np.nan
             met = run_metrics(F, m.pts_a, m.pts_b, pos, 1.0)
             ok = met.succeeded
-            rows[label].append((ok, met.f_score, hyp, ms, lines_ms))
+            rows[label].append((ok, met.f_score, hyp, ms, lines_ms, ran, used, loop_ms))
         sys.stderr.write(f"\r  {manifest.parent.name}: {i + 1}/{len(pairs)} pairs, "
                          f"{time.time() - t0:.0f} s")  # fmt: skip
     sys.stderr.write("\n")
@@ -127,8 +138,9 @@ def table(rows: dict) -> str:
     magsac_ms = float(np.median([r[3] for r in rows["cv-magsac"]]))
     out = [
         "| configuration | F-score | success % | hypotheses (median) | ms (median) | "
-        "ms / USAC_MAGSAC | line search ms per pair (median; share of ms) |",
-        "|---|---|---|---|---|---|---|",
+        "ms / USAC_MAGSAC | line search ms per pair (median; share of ms) | "
+        "line search run % (line pair used %) |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for label, rs in rows.items():
         r = np.array(rs, dtype=float)
@@ -139,12 +151,31 @@ def table(rows: dict) -> str:
         if np.isfinite(r[:, 4]).any():
             lines_ms = float(np.nanmedian(r[:, 4]))
             lines = f"{lines_ms:.2f} ({lines_ms / ms:.0%})"
+        share = "n/a"
+        if np.isfinite(r[:, 5]).any():
+            share = f"{100 * np.nanmean(r[:, 5]):.0f} ({100 * np.nanmean(r[:, 6]):.0f})"
         out.append(
             f"| {name} | {r[:, 1].mean():.3f} | {100 * r[:, 0].mean():.1f} | "
             f"{'n/a' if np.isnan(hyp) else f'{hyp:.0f}'} | {ms:.1f} | "
-            f"{ms / magsac_ms:.2f} | {lines} |"
+            f"{ms / magsac_ms:.2f} | {lines} | {share} |"
         )
-    return "\n".join(out)
+    return "\n".join(out) + "\n\n" + escape_note(rows)
+
+
+def escape_note(rows: dict) -> str:
+    """The line search's cost in hypotheses of ransac7's loop, the figure the escape weighs
+    (``separable.escape.LINE_SEARCH_HYPOTHESES``): its median ms per pair with the escape off
+    (every pair runs it) over ransac7's median ms per hypothesis of its loop (stage-2 ms over
+    hypotheses, per pair)."""
+    lines_ms = float(np.nanmedian([r[4] for r in rows[ESCAPE_OFF]]))
+    per_hyp = float(np.nanmedian([r[7] for r in rows[RANSAC7]]))
+    return (
+        f"Line search in hypothesis-equivalents: {lines_ms:.2f} ms per pair (median, escape off) "
+        f"over {1e3 * per_hyp:.1f} us per hypothesis of ransac7's loop (median) = "
+        f"{lines_ms / per_hyp:.0f} (the escape weighs {LINE_SEARCH_HYPOTHESES:.0f}). Line search "
+        f"run %: pairs whose line search the escape kept; line pair used %: pairs whose answer "
+        f"came from a line pair's stage-2 arm."
+    )
 
 
 def main(argv: list[str] | None = None) -> int:

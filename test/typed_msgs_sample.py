@@ -59,6 +59,7 @@ def sample_estimate() -> TwoViewEstimate:
         samples=777,
         fallback=True,
         unfixed_lead=True,
+        line_search_skipped=True,
         log10_nfa=-153.25,
         has_line_pair=True,
         line_a=np.array([0.6, 0.8, -412.5]),

@@ -56,7 +56,9 @@ class MethodResult:
         status: "ok" or the method's reason for no/unreliable model.
         line_pair: ((a, b, c), (a, b, c)) line pair used by the separable methods, else None.
         line_inliers: (M,) int indices of matches on the line pair agreeing with H_e.
-        fallback: the separable method fell back to plain RANSAC.
+        fallback: the separable method fell back to plain RANSAC (no usable line pair).
+        line_search_skipped: the separable method skipped its line search (the escape: plain
+            RANSAC was the cheaper way at the inlier rate its first samples showed).
         H_e, control_points: the separable method's stage-1 line homography and the control
             points of its line pair (None otherwise).
     """
@@ -71,6 +73,7 @@ class MethodResult:
     line_pair: tuple | None = None
     line_inliers: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     fallback: bool = False
+    line_search_skipped: bool = False
     H_e: np.ndarray | None = None
     control_points: tuple[np.ndarray, np.ndarray] | None = None
 
@@ -119,6 +122,7 @@ def _ours(name: str) -> Runner:
             line_pair=est.line_pair,
             line_inliers=np.asarray(est.line_inliers, dtype=np.int64),
             fallback=bool(est.fallback),
+            line_search_skipped=bool(est.line_search_skipped),
             H_e=est.H_e,
             control_points=est.control_points,
         )

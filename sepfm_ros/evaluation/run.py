@@ -56,7 +56,7 @@ class EvalResults:
     Attributes:
         runs: one dict per run: pair, scene, method, seed, the RunMetrics fields, has_model,
             hypotheses / stage1_hypotheses / stage2_hypotheses (None when n/a), ms, own_inliers,
-            status, fallback, line_inliers (count, separable methods).
+            status, fallback, line_search_skipped, line_inliers (count, separable methods).
         pairs: one dict per evaluated pair: pair, scene, kind, baseline, n_matches, n_positives,
             outlier_rate, cached.
         errors: pairs that could not be evaluated, with the reason.
@@ -162,6 +162,7 @@ def _run_row(
         own_inliers=r.own_inliers,
         status=r.status,
         fallback=r.fallback,
+        line_search_skipped=r.line_search_skipped,
         line_inliers=len(r.line_inliers) if method.separable else None,
     )
     return rec

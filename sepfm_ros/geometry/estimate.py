@@ -54,6 +54,10 @@ class Estimate:
         samples: minimal samples drawn, every stage together (stage 1's 3-point samples,
             stage 2, fallback); at most the ``max_samples`` option.
         fallback: True when standard RANSAC ran because no usable line pair was found.
+        line_search_skipped: True when the separable method skipped its line search (the
+            paper's escape, option ``line_search_escape``): the inlier ratio its first PROSAC
+            samples showed made standard RANSAC the cheaper way, and the estimate is standard
+            RANSAC's (``fallback`` stays False: no line pair was looked for).
         unfixed_lead: True when stage 2's best model came from its arm without fixed points
             (``EstimatorOptions.unfixed_share``), not from a line pair's; the line-pair fields
             are then None.
@@ -85,6 +89,7 @@ class Estimate:
     control_points: tuple[np.ndarray, np.ndarray] | None = None
     samples: int = 0
     fallback: bool = False
+    line_search_skipped: bool = False
     unfixed_lead: bool = False
     periodic_line_pairs: int = 0
     status: str = "ok"

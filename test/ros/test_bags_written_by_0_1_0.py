@@ -38,6 +38,8 @@ def test_the_fixtures_are_what_0_1_0_wrote():
             "diagnostic_msgs/msg/DiagnosticStatus"
         )
         assert reader.topics["/sepfm/estimate"].count == 3
+        (estimate,) = [c for c in reader._reader.connections if c.topic == "/sepfm/estimate"]
+        assert "line_search_skipped" not in estimate.msgdef.data  # 0.1.0's TwoViewEstimate
 
 
 def test_results_bag_reads_with_its_answers_and_calibration_checks():
@@ -46,6 +48,13 @@ def test_results_bag_reads_with_its_answers_and_calibration_checks():
     # as process 0.1.0 printed for it: median 0.386 px, max 0.392 px against ground truth
     assert all(r.F is not None and r.status == "ok" and r.inliers > 100 for r in results)
     assert [round(r.error_px, 3) for r in results] == [0.392, 0.377, 0.386]
+    # 0.1.0's TwoViewEstimate, read as today's: the fields after the one added since keep
+    # their values, and the new line_search_skipped reads False (no escape in 0.1.0)
+    assert all(r.estimate.line_search_skipped is False for r in results)
+    assert all(r.estimate.line_inliers > 0 and r.estimate.has_line_pair for r in results)
+    assert [r.estimate.method for r in results] == ["sep4"] * 3
+    with BagReader(RESULTS) as reader:
+        assert "sepfm_msgs/msg/TwoViewEstimate" in reader.migrated
     checks = read_calibration_checks(RESULTS)
     assert [c.log_time_ns for c in checks] == STAMPS  # one per pair, logged with it
     assert all(c.stamp_ns is None for c in checks)  # the bare status had no header

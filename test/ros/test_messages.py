@@ -209,3 +209,15 @@ def test_matches_the_estimator_refuses_are_bad_input_of_their_own_kind():
     assert msg.status == TwoViewEstimate.STATUS_BAD_INPUT and msg.bad_input_kind == ESTIMATOR_INPUT
     assert "NaN or inf" in msg.status_text and not msg.has_f
     assert msg.matches == 40 and len(answer.matches.matches) == 40
+
+
+@pytest.mark.parametrize("skipped", [True, False])
+def test_estimate_message_says_whether_the_line_search_was_skipped(skipped):
+    """``Estimate.line_search_skipped`` (the escape) reaches ``TwoViewEstimate`` through CDR, apart
+    from ``fallback`` (no usable line pair found)."""
+    result = make_result()
+    result.estimate.line_search_skipped = skipped
+    msg = estimate_message(HEADERS, result, SETTINGS, "image", None, calibration_input=False)
+    msg = deserialize_message(serialize_message(msg), TwoViewEstimate)
+    assert msg.line_search_skipped is skipped
+    assert msg.fallback is False

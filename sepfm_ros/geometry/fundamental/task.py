@@ -20,7 +20,7 @@ from sepfm_ros.geometry.fundamental.options import (
 )
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.robust.lmeds import RobustScale
-from sepfm_ros.geometry.robust.loop import Budget, RansacResult, run_ransac
+from sepfm_ros.geometry.robust.loop import Budget, Loop, RansacResult, make_loop
 from sepfm_ros.geometry.robust.trials import ransac_trials
 
 __all__ = ["FundamentalTask", "sample_cap"]
@@ -116,10 +116,17 @@ class FundamentalTask:
         pool only, which on repetitive texture (a periodic row or a chessboard ranked first)
         holds the ambiguous matches and the plane.
         """
+        return self.standard_loop(self.rng, initial).run()
+
+    def standard_loop(
+        self, rng: np.random.Generator, initial: tuple[Any, float, int] | None = None
+    ) -> Loop:
+        """The loop :meth:`standard` runs, drawing from ``rng``, before its first sample (the
+        separable method probes the inlier ratio with its first rounds, ``Loop.start``)."""
         arm = self.whole()
         sampling = replace(self.sampling.loop(), prosac_growth=max(1, self.budget.left()))
-        return run_ransac(
-            [arm], self.rng, self.confidence, self.budget.limit,
+        return make_loop(
+            [arm], rng, self.confidence, self.budget.limit,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
             budget=self.budget, sampling=sampling,
         )  # fmt: skip

@@ -24,7 +24,7 @@ from sepfm_ros.geometry.robust.sprt import Sprt
 from sepfm_ros.geometry.robust.state import Arm, Best, Budget
 from sepfm_ros.geometry.robust.stopping import StoppingRule
 
-__all__ = ["Budget", "Loop", "RansacResult", "run_ransac"]
+__all__ = ["Budget", "Loop", "RansacResult", "make_loop", "run_ransac"]
 
 
 @dataclass
@@ -227,6 +227,19 @@ class Loop:
             sprt.rej_read += int(read[rejected].sum())
         return cost, count
 
+    def start(self, samples: int) -> bool:
+        """The rounds of :meth:`run` until at least ``samples`` samples are drawn in all, the
+        stop or the budget's end (the separable method's probe of the inlier ratio); True when
+        the loop converged. :meth:`run` then goes on as if it had run the rounds itself."""
+        while self.race.active and sum(arm.samples for arm in self.arms) < samples:
+            self.sample_round()
+            if self.converged():
+                return True
+            if self.budget.left() <= 0:
+                return False
+            self.race.step(self.optimize_best, self.join)
+        return self.converged()
+
     def run(self) -> RansacResult:
         """Rounds until the stop, the budget's end or no arm is left; the result."""
         converged = False
@@ -305,6 +318,28 @@ def run_ransac(
     not converge has just grown to the whole pool when it stops. With the SPRT the all-inlier
     probability of F(k, r) is scaled by 1 - 1/A, the chance that the SPRT accepts a good model.
     """
+    return make_loop(
+        arms, rng, confidence, max_samples, min_samples, race, batch, initial, extra_lo_ratio,
+        max_extra_lo, budget, sampling,
+    ).run()  # fmt: skip
+
+
+def make_loop(
+    arms: Iterable[Problem],
+    rng: np.random.Generator,
+    confidence: float = 0.99,
+    max_samples: int = 10000,
+    min_samples: int = 1,
+    race: RaceOptions | None = None,
+    batch: int = 64,
+    initial: tuple[Any, float, int] | None = None,
+    extra_lo_ratio: float = 0.6,
+    max_extra_lo: int = 10,
+    budget: Budget | None = None,
+    sampling: SamplingOptions | None = None,
+) -> Loop:
+    """The :class:`Loop` that :func:`run_ransac` runs (same arguments), with its first arm
+    joined, before any sample: ``make_loop(...).run()`` is ``run_ransac(...)``."""
     loop = Loop(
         arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,
         extra_lo_ratio, max_extra_lo, budget or Budget(max_samples), sampling or SamplingOptions(),
@@ -312,4 +347,4 @@ def run_ransac(
     loop.join()
     if initial is not None and loop.arms:
         loop.start_from(*initial)
-    return loop.run()
+    return loop

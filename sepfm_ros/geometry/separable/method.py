@@ -1,9 +1,11 @@
-"""The separable two-stage method (paper Sec. 5): line pairs, stage 1 (H_e on each line pair,
+"""The separable two-stage method (paper Sec. 5): the escape to standard RANSAC where the line
+search cannot pay for itself (``separable.escape``), line pairs, stage 1 (H_e on each line pair,
 as its arm joins), stage 2 (the race of 3 fixed + 4 or 5 sampled arms) and the fallback to
 standard RANSAC from the best model so far."""
 
 from __future__ import annotations
 
+import copy
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -15,6 +17,7 @@ from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.fundamental.task import FundamentalTask
 from sepfm_ros.geometry.robust.loop import RansacResult, run_ransac
 from sepfm_ros.geometry.robust.options import RaceOptions
+from sepfm_ros.geometry.separable.escape import PROBE_SAMPLES, line_search_pays
 from sepfm_ros.geometry.separable.line_pairs import (
     LinePair,
     find_line_pairs,
@@ -82,6 +85,11 @@ def separable(
     (a wrong fixed triple is the usual cause). Fills ``est``'s line-pair fields and timings."""
     d, opt = problem.data, options
     t0 = time.perf_counter()
+    if opt.lines.line_search_escape and not problem.lmeds:
+        escaped = _escape(problem, opt.lines.line_search_cost, est)
+        if escaped is not None:
+            return escaped
+        t0 = time.perf_counter()
     lopts = opt.lines.search()
     pairs = find_line_pairs(d.pts1, d.pts2, size1, size2, lopts)
     t1 = time.perf_counter()
@@ -156,6 +164,32 @@ def separable(
     est.fallback = True
     est.stage2_hypotheses += result.hypotheses
     est.timings_ms["fallback"] = 1e3 * (time.perf_counter() - t3)
+    return result
+
+
+def _escape(problem: FundamentalTask, line_search_cost: float, est: Estimate) -> RansacResult | None:
+    """The paper's escape (``separable.escape``): the first PROBE_SAMPLES samples of the
+    standard loop, drawn from a copy of the task's generator, show the inlier ratio; when the
+    line search cannot pay for itself at that ratio, that loop goes on to its end and its result
+    is returned (``est.line_search_skipped``; with the same seed, standard RANSAC's own answer,
+    the probe being its start). Otherwise None: the task's generator is untouched, the probe's
+    samples and models count in ``est`` (stage 2's) and its time as ``timings_ms["probe"]``."""
+    t = time.perf_counter()
+    rng = copy.deepcopy(problem.rng)
+    loop = problem.standard_loop(rng)
+    converged = loop.start(PROBE_SAMPLES)
+    ratio = max(loop.best.count, 0) / max(len(problem.data), 1)
+    if not converged and line_search_pays(
+        ratio, problem.model_points, problem.confidence, line_search_cost
+    ):
+        est.stage2_hypotheses += loop.hypotheses
+        est.timings_ms["probe"] = 1e3 * (time.perf_counter() - t)
+        return None
+    problem.rng = rng  # what follows (the final model's steps) draws on as after standard()
+    result = loop.run()
+    est.line_search_skipped = True
+    est.stage2_hypotheses += result.hypotheses
+    est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t)
     return result
 
 

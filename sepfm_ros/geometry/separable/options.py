@@ -13,6 +13,7 @@ from sepfm_ros.geometry.fundamental.options import (
     require_positive,
 )
 from sepfm_ros.geometry.robust.options import PoolRule
+from sepfm_ros.geometry.separable.escape import LINE_SEARCH_HYPOTHESES
 
 
 @dataclass(frozen=True)
@@ -77,6 +78,14 @@ class Lines:
             stage-2 arm joins the race only after those of the other line pairs, and its
             matches are not sampled by the arms built after it was found and come last in the
             fallback's PROSAC order. Off by default (docs/design.md, repetitive structure).
+        line_search_escape: the paper's escape (``separable.escape``): the first PROSAC
+            samples of standard RANSAC probe the inlier ratio, and when F(3, r) + F(k - 3, r)
+            plus the line search's cost is not below F(k, r), standard RANSAC goes on from the
+            probe and the line search is skipped (``Estimate.line_search_skipped``). Not
+            applied to the LMedS methods.
+        line_search_cost: the line search's cost in F hypotheses that the escape weighs
+            (default ``separable.escape.LINE_SEARCH_HYPOTHESES``, measured by
+            ``benchmarks/bench_ablation.py``).
     """
 
     hough_width: int = 512
@@ -85,11 +94,15 @@ class Lines:
     line_threshold: float = 1.0
     min_line_inliers: int = 4
     periodic_check: bool = False
+    line_search_escape: bool = True
+    line_search_cost: float = LINE_SEARCH_HYPOTHESES
 
     def __post_init__(self) -> None:
         coerce_fields(self)
         require_least(self, {"hough_width": 1, "max_line_pairs": 1, "min_line_inliers": 3})
         require_positive(self, ("line_distance", "line_threshold"))
+        if not self.line_search_cost >= 0:  # NaN too
+            raise ValueError(f"option line_search_cost must be >= 0, got {self.line_search_cost}")
 
     def search(self) -> LineSearchOptions:
         """Options of the line-pair search (two pairs beyond those that race, as spares)."""

@@ -66,7 +66,9 @@ class BagReader:
     ``.mcap``/``.db3`` file) and ROS 1 bags (one ``.bag`` file). ROS 1 messages are converted to
     ROS 2 CDR as they are read (types from the bag's own definitions, ``Header.seq`` dropped,
     ``tf/tfMessage`` renamed to ``tf2_msgs/msg/TFMessage``, the way ``rosbags-convert`` does), so
-    every :class:`RawMessage` holds CDR bytes whatever the format.
+    every :class:`RawMessage` holds CDR bytes whatever the format. A rosbag2 message whose type
+    the bag defines otherwise than today's types (an older ``sepfm_msgs``) is migrated to
+    today's definition as it is read (``_prepare_ros2``).
 
     Args:
         path: the bag (see above).
@@ -88,6 +90,8 @@ class BagReader:
         self.typestore = TYPESTORE
         self._to_cdr: dict[str, Callable[[bytes], bytes]] = {}
         self._msgtype: dict[int, str] = {}  # connection id -> ROS 2 type name
+        #: rosbag2 types read as today's definition, not the bag's (``_prepare_ros2``)
+        self.migrated: set[str] = set()
         if self.is_ros1:
             try:
                 self._prepare_ros1()
@@ -96,6 +100,8 @@ class BagReader:
                 raise BagCorruptError(
                     f"cannot read the message definitions of {self.path}: {err}"
                 ) from None
+        elif isinstance(self._reader, AnyReader):
+            self._prepare_ros2()
         self.topics: dict[str, TopicInfo] = {}
         for conn in self._reader.connections:
             msgtype = self._ros2_type(conn)
@@ -168,6 +174,29 @@ class BagReader:
                 )
         self.typestore = dst
 
+    def _prepare_ros2(self) -> None:
+        """Converters for the rosbag2 types whose stored definition differs in wire format from
+        today's (a bag written with an older sepfm_msgs: the ``TwoViewEstimate`` of 0.1.0 has no
+        ``line_search_skipped``): fields are migrated by name, new fields take their defaults,
+        so rclpy deserialises every message with today's types. Bags without stored
+        definitions are read with today's types as they are."""
+        src = self._reader.typestore
+        cache: dict[str, object] = {}
+        for conn in self._reader.connections:
+            msgtype = conn.msgtype
+            if msgtype in self._to_cdr or msgtype not in TYPESTORE.fielddefs:
+                continue
+            try:
+                same = is_same_wireformat(src, TYPESTORE, msgtype, msgtype)
+            except KeyError:  # a nested type the bag does not define: read as stored
+                continue
+            if not same:
+                self.migrated.add(msgtype)
+                self._to_cdr[msgtype] = partial(
+                    migrate_bytes, src, TYPESTORE, msgtype, msgtype, cache,
+                    src_is2=True, dst_is2=True,
+                )  # fmt: skip
+
     def __enter__(self) -> BagReader:
         return self
 
@@ -226,8 +255,9 @@ class BagReader:
             return
         try:
             for conn, log_time, data in self._reader.messages(conns, start=start_ns):
-                if self.is_ros1:
-                    data = self._to_cdr[conn.msgtype](data)
+                convert = self._to_cdr.get(conn.msgtype)
+                if convert is not None:  # ROS 1, or an older definition of a type
+                    data = convert(data)
                 yield RawMessage(conn.topic, self._ros2_type(conn), int(log_time), bytes(data))
         except Exception as err:  # noqa: BLE001 - corrupt storage raises many kinds (zstd, lz4, ...)
             raise BagCorruptError(

@@ -168,6 +168,11 @@ class FrameResult:
         return int(self.estimate.hypotheses) if self.estimate is not None else 0
 
     @property
+    def line_search_skipped(self) -> bool:
+        """The estimator skipped its line search (the escape; False in bags of 0.1.0)."""
+        return bool(self.estimate.line_search_skipped) if self.estimate is not None else False
+
+    @property
     def status(self) -> str:
         return self.estimate.status_text if self.estimate is not None else "no estimate"
 

@@ -309,14 +309,18 @@ class BagWriter:
                 if conn.topic in conns:
                     continue
                 ext = conn.ext
+                qos = ext.offered_qos_profiles if isinstance(ext, ConnectionExtRosbag2) else ()
+                if conn.msgtype in reader.migrated:  # read as today's type: stored as such
+                    conns[conn.topic] = writer.add_connection(
+                        conn.topic, conn.msgtype, typestore=TYPESTORE, offered_qos_profiles=qos
+                    )
+                    continue
                 conns[conn.topic] = writer.add_connection(
                     conn.topic,
                     conn.msgtype,
                     msgdef=conn.msgdef.data,
                     rihs01=conn.digest,
-                    offered_qos_profiles=ext.offered_qos_profiles
-                    if isinstance(ext, ConnectionExtRosbag2)
-                    else (),
+                    offered_qos_profiles=qos,
                 )
             for msg in reader.messages():
                 writer.write(conns[msg.topic], msg.log_time_ns, msg.data)

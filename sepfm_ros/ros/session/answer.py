@@ -358,6 +358,7 @@ def estimate_message(
     msg.samples = int(est.samples)
     msg.fallback = bool(est.fallback)
     msg.unfixed_lead = bool(est.unfixed_lead)
+    msg.line_search_skipped = bool(est.line_search_skipped)
     if est.log10_nfa is not None:
         msg.log10_nfa = float(est.log10_nfa)
     if est.line_pair is not None:

@@ -1,0 +1,127 @@
+"""The paper's escape (``separable.escape``): the decision on numbers, and the separable method
+skipping its line search on a clean pair (the answer is then standard RANSAC's, to the bit)
+while running it on a pair with many outliers."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sepfm_ros.geometry import estimate_fundamental
+from sepfm_ros.geometry.robust.trials import ransac_trials
+from sepfm_ros.geometry.separable.escape import (
+    LINE_SEARCH_HYPOTHESES,
+    MODELS_PER_SAMPLE,
+    escape_costs,
+    line_search_pays,
+)
+from sepfm_ros.geometry.synthetic import make_pair
+
+
+def test_costs_are_the_papers_trial_counts():
+    # w = 0.5, p = 0.99: F(3) = 35, F(4) = 72, F(7) = 588 (the paper's Fig. 2 at r = 0.5)
+    assert [ransac_trials(k, 0.5) for k in (3, 4, 7)] == [35, 72, 588]
+    costs = escape_costs(0.5, 7, 0.99, line_search_hypotheses=40.0, models_per_sample=1.5)
+    assert costs.separable == pytest.approx(35 + 1.5 * 72 + 40.0)
+    assert costs.standard == pytest.approx(1.5 * 588)
+    # the eight-point variant: F(3) + F(5) against F(8)
+    costs8 = escape_costs(0.5, 8, 0.99, line_search_hypotheses=0.0, models_per_sample=1.0)
+    assert costs8 == (35 + ransac_trials(5, 0.5), ransac_trials(8, 0.5))
+
+
+def test_the_line_search_pays_at_half_outliers_and_not_on_a_clean_pair():
+    assert line_search_pays(0.5, 7, 0.99)  # 183 against 882 hypotheses
+    assert line_search_pays(0.2, 7, 0.99)
+    # w = 0.9: F(3) = 4, F(4) = 5, F(7) = 8: 4 + 7.5 + 40 against 12
+    assert not line_search_pays(0.9, 7, 0.99)
+    assert not line_search_pays(1.0, 7, 0.99)
+    # a free line search pays at w = 0.9 (11.5 < 12); at w = 1 every count is 1: a tie, and a
+    # tie goes to standard RANSAC
+    assert line_search_pays(0.9, 7, 0.99, line_search_hypotheses=0.0)
+    assert not line_search_pays(1.0, 7, 0.99, line_search_hypotheses=0.0, models_per_sample=2.0)
+
+
+def test_no_model_seen_keeps_the_line_search():
+    # w = 0: every F(k, r) is infinite; as w -> 0 F(7, r) outgrows F(3, r) + F(4, r)
+    assert line_search_pays(0.0, 7, 0.99)
+    assert line_search_pays(1e-60, 7, 0.99)  # w^7 underflows, w^3 does not
+
+
+def test_one_break_even_ratio():
+    """Below one inlier ratio the line search pays, above it it does not (no flapping)."""
+    ratios = np.linspace(0.01, 1.0, 100)
+    pays = [line_search_pays(float(w), 7, 0.99) for w in ratios]
+    assert pays[0] and not pays[-1]
+    switch = int(np.argmin(pays))
+    assert all(pays[:switch]) and not any(pays[switch:])
+    # with the defaults the switch lies between 0.6 and 0.85 inliers
+    assert 0.6 < ratios[switch] < 0.85
+    assert LINE_SEARCH_HYPOTHESES > 0 and MODELS_PER_SAMPLE >= 1
+
+
+@pytest.mark.parametrize(
+    "bad", [(-0.1, 7), (1.5, 7), (float("nan"), 7), (0.5, 6)], ids=str
+)
+def test_bad_arguments_raise(bad):
+    with pytest.raises(ValueError):
+        escape_costs(bad[0], bad[1], 0.99)
+
+
+def _pair(n_inliers: int, n_outliers: int, seed: int):
+    return make_pair(n_inliers=n_inliers, n_outliers=n_outliers, n_lines=3, noise=0.5, seed=seed)
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_clean_pair_escapes_to_standard_ransac(seed):
+    sp = _pair(200, 8, seed)
+    est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=seed)
+    assert est.ok and est.line_search_skipped
+    assert not est.fallback  # no line pair was looked for: not "none found"
+    assert est.line_pair is None and est.stage1_hypotheses == 0
+    assert "lines" not in est.timings_ms
+    # the probe is the start of standard RANSAC's loop, drawn from the same generator: the
+    # answer is ransac7's own, models and samples included
+    r7 = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="ransac7", seed=seed)
+    np.testing.assert_array_equal(est.F, r7.F)
+    np.testing.assert_array_equal(est.inliers, r7.inliers)
+    assert (est.hypotheses, est.samples) == (r7.hypotheses, r7.samples)
+    # without the escape the line search runs on the same pair
+    off = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=seed, line_search_escape=False
+    )
+    assert not off.line_search_skipped and "lines" in off.timings_ms
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_a_pair_with_many_outliers_runs_the_line_search(seed):
+    sp = _pair(80, 160, seed)  # 116 true matches of 276 (36 on the lines): 58% outliers
+    est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=seed)
+    assert est.ok and not est.line_search_skipped
+    assert est.line_pair is not None and est.stage1_hypotheses > 0
+    assert "lines" in est.timings_ms and "probe" in est.timings_ms
+    # the probe's models count: more than with the escape off, whose draws stage 2 repeats
+    off = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=seed, line_search_escape=False
+    )
+    np.testing.assert_array_equal(est.F, off.F)
+    assert est.hypotheses > off.hypotheses and est.samples > off.samples
+
+
+def test_an_expensive_line_search_is_skipped_even_with_outliers():
+    sp = _pair(80, 160, 1)
+    est = estimate_fundamental(
+        sp.pts1, sp.pts2, sp.image_size, method="sep4", seed=1, line_search_cost=1e12
+    )
+    assert est.ok and est.line_search_skipped and est.line_pair is None
+
+
+def test_the_lmeds_methods_keep_their_line_search():
+    sp = _pair(200, 8, 1)
+    est = estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, method="sep4-lmeds", seed=1)
+    assert not est.line_search_skipped and "lines" in est.timings_ms
+
+
+def test_bad_line_search_cost_raises():
+    sp = _pair(40, 0, 1)
+    with pytest.raises(ValueError, match="line_search_cost must be >= 0"):
+        estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, line_search_cost=-1.0)

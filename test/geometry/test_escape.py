@@ -59,9 +59,7 @@ def test_one_break_even_ratio():
     assert LINE_SEARCH_HYPOTHESES > 0 and MODELS_PER_SAMPLE >= 1
 
 
-@pytest.mark.parametrize(
-    "bad", [(-0.1, 7), (1.5, 7), (float("nan"), 7), (0.5, 6)], ids=str
-)
+@pytest.mark.parametrize("bad", [(-0.1, 7), (1.5, 7), (float("nan"), 7), (0.5, 6)], ids=str)
 def test_bad_arguments_raise(bad):
     with pytest.raises(ValueError):
         escape_costs(bad[0], bad[1], 0.99)

@@ -167,7 +167,9 @@ def separable(
     return result
 
 
-def _escape(problem: FundamentalTask, line_search_cost: float, est: Estimate) -> RansacResult | None:
+def _escape(
+    problem: FundamentalTask, line_search_cost: float, est: Estimate
+) -> RansacResult | None:
     """The paper's escape (``separable.escape``): the first PROBE_SAMPLES samples of the
     standard loop, drawn from a copy of the task's generator, show the inlier ratio; when the
     line search cannot pay for itself at that ratio, that loop goes on to its end and its result

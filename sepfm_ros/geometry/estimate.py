@@ -57,7 +57,10 @@ class Estimate:
         line_search_skipped: True when the separable method skipped its line search (the
             paper's escape, option ``line_search_escape``): the inlier ratio its first PROSAC
             samples showed made standard RANSAC the cheaper way, and the estimate is standard
-            RANSAC's (``fallback`` stays False: no line pair was looked for).
+            RANSAC's (``fallback`` stays False: no line pair was looked for). When that answer
+            is degenerate (a dominant plane shows the probe a high inlier ratio) or missing,
+            the method runs again with its line search, and this is False; the first try's
+            hypotheses and samples count.
         unfixed_lead: True when stage 2's best model came from its arm without fixed points
             (``EstimatorOptions.unfixed_share``), not from a line pair's; the line-pair fields
             are then None.

@@ -102,35 +102,65 @@ def estimate_fundamental(
         raise ValueError(f"threshold must be positive, got {threshold}")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    is_separable, solver, scoring = METHOD_SPECS[method]
+    solver = METHOD_SPECS[method][1]
     size1 = validate_size(image_size1, "image_size1")
     size2 = validate_size(image_size1 if image_size2 is None else image_size2, "image_size2")
     p1, p2 = validate_points(pts1, pts2, 7 if solver == "seven" else 8)
-    rng = np.random.default_rng(seed)
     est = Estimate(F=None, inliers=np.zeros(len(p1), dtype=bool), method=method)
     reason = input_degeneracy(p1, p2, threshold)
     if reason is None:
-        data = Correspondences.from_pixels(p1, p2)
-        budget = Budget(sample_cap(opt.sampler.max_samples, len(data)))
-        problem = FundamentalTask(
-            data, solver, scoring, threshold, confidence, opt.sampler, opt.local, opt.checks,
-            rng, budget,
-        )  # fmt: skip
-        if is_separable:
-            parts = SeparableOptions(opt.lines, opt.fixed, opt.race)
-            result = separable(problem, parts, est, size1, size2)
-        else:
-            t2 = time.perf_counter()
-            result = problem.standard()
-            est.stage2_hypotheses = result.hypotheses
-            est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
-        est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
-        est.samples = budget.used
-        if result.model is None:
-            reason = "no model: every sample was degenerate"
-        else:
-            finish(problem, est, result.model)
+        args = (p1, p2, size1, size2, method, threshold, confidence, seed)
+        reason = _estimate(*args, opt, est)
+        if est.line_search_skipped and (reason is not None or est.code == StatusCode.DEGENERATE):
+            # the escape's standard RANSAC found no F or a degenerate one (a dominant plane
+            # shows a high inlier ratio to the probe): the line search gets its turn, as
+            # without the escape (same seed); the work of the first try counts
+            first = est
+            est = Estimate(F=None, inliers=np.zeros(len(p1), dtype=bool), method=method)
+            no_escape = EstimatorOptions.from_kwargs(opt, line_search_escape=False)
+            reason = _estimate(*args, no_escape, est)
+            est.stage2_hypotheses += first.stage2_hypotheses
+            est.hypotheses += first.hypotheses
+            est.samples += first.samples
+            est.timings_ms["escape"] = first.timings_ms.get("stage2", 0.0)
     if reason is not None:
         est.set_status(StatusCode.DEGENERATE, reason)
     est.timings_ms["total"] = 1e3 * (time.perf_counter() - t_start)
     return est
+
+
+def _estimate(
+    p1: np.ndarray,
+    p2: np.ndarray,
+    size1: tuple[float, float],
+    size2: tuple[float, float],
+    method: str,
+    threshold: float,
+    confidence: float,
+    seed: int | None,
+    opt: EstimatorOptions,
+    est: Estimate,
+) -> str | None:
+    """One estimate of F from validated (N, 2) pixels into ``est`` (a fresh generator from
+    ``seed``); the reason when every sample was degenerate, else None."""
+    is_separable, solver, scoring = METHOD_SPECS[method]
+    data = Correspondences.from_pixels(p1, p2)
+    budget = Budget(sample_cap(opt.sampler.max_samples, len(data)))
+    problem = FundamentalTask(
+        data, solver, scoring, threshold, confidence, opt.sampler, opt.local, opt.checks,
+        np.random.default_rng(seed), budget,
+    )  # fmt: skip
+    if is_separable:
+        parts = SeparableOptions(opt.lines, opt.fixed, opt.race)
+        result = separable(problem, parts, est, size1, size2)
+    else:
+        t2 = time.perf_counter()
+        result = problem.standard()
+        est.stage2_hypotheses = result.hypotheses
+        est.timings_ms["stage2"] = 1e3 * (time.perf_counter() - t2)
+    est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
+    est.samples = budget.used
+    if result.model is None:
+        return "no model: every sample was degenerate"
+    finish(problem, est, result.model)
+    return None

@@ -191,7 +191,11 @@ def test_plane_check_keeps_a_right_f_whose_off_plane_support_is_small(seed):
     # keeps only 1-2 of the off-plane ones must not replace it (it would then be flagged as a
     # dominant plane and the right F lost)
     pts1, pts2, off1, off2, _ = planar_majority_pair(n_off=10, n_out=30, seed=seed)
-    est = estimate_fundamental(pts1, pts2, SIZE, seed=seed, plane_check=False)
+    # the line search's F: the escape would hand seeds 4 and 47 to standard RANSAC, which
+    # without the plane check stops on the plane (test_escape.py: with it, sep4 retries)
+    est = estimate_fundamental(
+        pts1, pts2, SIZE, seed=seed, plane_check=False, line_search_escape=False
+    )
     assert np.median(symmetric_epipolar_distance(est.F, off1, off2)) < 1.0
     check = plane_and_parallax(est.F, pts1, pts2, 1.0, np.random.default_rng(seed))
     assert check.planar and check.candidates > 0  # challenged: its support is not far above chance

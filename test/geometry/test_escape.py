@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from test_degeneracy import SIZE, planar_majority_pair
 
-from sepfm_ros.geometry import estimate_fundamental
+from sepfm_ros.geometry import estimate_fundamental, symmetric_epipolar_distance
 from sepfm_ros.geometry.robust.trials import ransac_trials
 from sepfm_ros.geometry.separable.escape import (
     LINE_SEARCH_HYPOTHESES,
@@ -123,3 +124,23 @@ def test_bad_line_search_cost_raises():
     sp = _pair(40, 0, 1)
     with pytest.raises(ValueError, match="line_search_cost must be >= 0"):
         estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, line_search_cost=-1.0)
+
+
+@pytest.mark.parametrize("seed", [4, 21, 22])
+def test_a_dominant_plane_gets_the_line_search_after_all(seed):
+    """A plane holding most matches shows the probe a high inlier ratio and the escape hands the
+    pair to standard RANSAC, which stops on the plane (degenerate); sep4 then runs its line
+    search as without the escape (same answer, the first try's work counted). On seed 4 the
+    line search finds the F of the 10 off-plane matches."""
+    pts1, pts2, off1, off2, _ = planar_majority_pair(n_off=10, n_out=30, seed=seed)
+    r7 = estimate_fundamental(pts1, pts2, SIZE, seed=seed, method="ransac7")
+    assert r7.status.startswith("degenerate: dominant plane")
+    est = estimate_fundamental(pts1, pts2, SIZE, seed=seed)
+    off = estimate_fundamental(pts1, pts2, SIZE, seed=seed, line_search_escape=False)
+    assert "escape" in est.timings_ms and not est.line_search_skipped
+    assert est.line_pair is not None and est.status == off.status
+    np.testing.assert_array_equal(est.F, off.F)
+    assert est.hypotheses == off.hypotheses + r7.hypotheses
+    assert est.samples == off.samples + r7.samples
+    if seed == 4:
+        assert est.ok and np.median(symmetric_epipolar_distance(est.F, off1, off2)) < 1.0

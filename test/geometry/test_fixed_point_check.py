@@ -118,13 +118,14 @@ def test_kitti_pair_whose_extreme_line_match_is_wrong(shared_data):
     # 0.80-0.83) on seeds 1-3; the 7-point baseline finds about 515 every time.
     _, m, pos = manifest_pair(shared_data, "kitti_seq2/left/000006~left/000007", 0.95)
     # Inner sampling of the final model (on by default) also leaves that basin; it is off here
-    # so the check is measured alone, and then on without the check.
+    # so the check is measured alone, and then on without the check. The escape is off: the
+    # check is stage 2's, and on some seeds the escape skips the line search on this pair.
     f_score = {}
     for check, inner in ((1.5, 0), (0.0, 0), (0.0, 20)):
         for seed in range(4):
             est = estimate_fundamental(
                 m.pts_a, m.pts_b, m.size_a, m.size_b, threshold=1.0, seed=seed,
-                fixed_point_check=check, inner_samples=inner,
+                fixed_point_check=check, inner_samples=inner, line_search_escape=False,
             )  # fmt: skip
             assert est.status == "ok"
             f_score[check, inner, seed] = run_metrics(est.F, m.pts_a, m.pts_b, pos, 1.0).f_score

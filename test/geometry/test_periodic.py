@@ -197,13 +197,13 @@ def test_fallback_prosac_reaches_the_whole_pool_within_the_budget_left(monkeypat
         opt.local, opt.checks, np.random.default_rng(0), budget,
     )  # fmt: skip
     seen = {}
-    real = task.run_ransac
+    real = task.make_loop
 
     def spy(*args, **kwargs):
         seen["growth"] = kwargs["sampling"].prosac_growth
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(task, "run_ransac", spy)
+    monkeypatch.setattr(task, "make_loop", spy)
     result = problem.standard()
     assert seen["growth"] == 300
     assert budget.used <= 1000 and result.model is not None

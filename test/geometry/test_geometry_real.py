@@ -21,7 +21,7 @@ def test_sep5_recovers_F_on_at_least_97_percent_of_real_pairs(shared_data):
     assert not errors and len(pairs) >= 150
     cache = MatchesCache(REPO_ROOT / ".cache" / "matches", MatchSettings("sift", 0.8))
     failures = []
-    lines_used = 0
+    lines_used = searched = 0
     for pair in pairs:
         m = cache.matches(pair)
         gt_inliers = symmetric_epipolar_distance(pair.F_gt, m.pts_a, m.pts_b) < 1.0
@@ -29,6 +29,7 @@ def test_sep5_recovers_F_on_at_least_97_percent_of_real_pairs(shared_data):
             m.pts_a, m.pts_b, m.size_a, m.size_b, method="sep5", threshold=1.0, seed=0
         )
         lines_used += est.line_pair is not None
+        searched += not est.line_search_skipped
         if est.F is None:
             failures.append((pair.pair_id, est.status))
             continue
@@ -37,8 +38,11 @@ def test_sep5_recovers_F_on_at_least_97_percent_of_real_pairs(shared_data):
             failures.append((pair.pair_id, float(np.median(err))))
     success = 1.0 - len(failures) / len(pairs)
     print(
-        f"sep5 success {100 * success:.1f}% of {len(pairs)} pairs; line pair used on "
-        f"{lines_used}; failures: {failures}"
+        f"sep5 success {100 * success:.1f}% of {len(pairs)} pairs; line search run on "
+        f"{searched} (the escape skipped it on the others), line pair used on {lines_used}; "
+        f"failures: {failures}"
     )
     assert success >= 0.97, failures
-    assert lines_used >= 0.9 * len(pairs)
+    # where the escape kept the line search, it found a line pair (most of these clean pairs
+    # take the escape: more than about 77 % inliers)
+    assert searched >= 10 and lines_used >= 0.9 * searched

@@ -18,7 +18,12 @@ threads, one pair apart, as the live node does; the result of a pair does not ch
 
 Timing stages (milliseconds): ``decode`` (when given), ``features``, ``match``, ``estimate`` (the
 whole estimator call), the estimator's own stages when it reports them (``lines`` = line-pair
-search, ``stage1``, ``stage2``, ``refine``) and ``total``.
+search, ``stage1``, ``stage2``, ``refine``), ``subpixel`` (with ``subpixel_b``) and ``total``.
+
+With ``subpixel_b`` (a calibrated stereo rig's stream), :meth:`Pipeline.match` also tracks each
+match's point of image a into image b to sub-pixel accuracy
+(:func:`~sepfm_ros.pipeline.subpixel.refine_points_b`): ``PipelineResult.refined_b``, for the
+calibration's correction; F and everything else stay those of the matches as detected.
 """
 
 from __future__ import annotations
@@ -50,6 +55,7 @@ from sepfm_ros.pipeline.features import (
     make_detector,
     match_descriptors,
 )
+from sepfm_ros.pipeline.subpixel import refine_points_b
 
 ESTIMATOR_STAGES = ("lines", "stage1", "stage2", "refine")
 
@@ -64,6 +70,8 @@ class MatchedPair:
         timings_ms: stages so far (prior stages, "features", "match").
         config: the config the matches were made with (the estimate uses it too).
         busy_ms: milliseconds spent so far (prior stages included), counted in "total".
+        refined_b: with ``subpixel_b``, (N, 2) sub-pixel points in image b of ``matches.pts_a``
+            (image pixels, NaN where tracking failed); else None.
     """
 
     matches: Matches
@@ -72,6 +80,7 @@ class MatchedPair:
     timings_ms: dict[str, float]
     config: PipelineConfig
     busy_ms: float
+    refined_b: np.ndarray | None = None
 
 
 @dataclass
@@ -90,6 +99,9 @@ class PipelineResult:
         coordinates: the pixels of ``matches``, ``errors`` and F: "image" (as detected) or
             "undistorted" (undistorted pixels of each camera's K, when cameras were given).
         image_matches: with cameras, the matches in image pixels as detected; else None.
+        refined_b: with the pipeline's ``subpixel_b``, (N, 2) sub-pixel points in image b of
+            ``matches.pts_a`` in the pixels of ``coordinates`` (NaN where tracking failed);
+            else None.
     """
 
     matches: Matches
@@ -101,6 +113,7 @@ class PipelineResult:
     timings_ms: dict[str, float]
     coordinates: str = "image"
     image_matches: Matches | None = None
+    refined_b: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -152,7 +165,11 @@ class Pipeline:
         config: PipelineConfig | None = None,
         cache_size: int = 4,
         parallel_detect: bool = False,
+        subpixel_b: bool = False,
     ) -> None:
+        """``subpixel_b``: also track each match into image b to sub-pixel accuracy (see the
+        module docstring)."""
+        self.subpixel_b = bool(subpixel_b)
         self._cache: OrderedDict[Hashable, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._cache_size = int(cache_size)
         self.images_detected = 0  # images whose features were computed
@@ -264,8 +281,13 @@ class Pipeline:
             k = cfg.max_matches
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])
         timings["match"] = _ms(t0)
+        refined_b = None
+        if self.subpixel_b:
+            t0 = time.perf_counter()
+            refined_b = refine_points_b(image_a, image_b, matches.pts_a, matches.pts_b)
+            timings["subpixel"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        return MatchedPair(matches, size_a, size_b, timings, cfg, busy)
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b)
 
     def estimate(
         self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None
@@ -286,6 +308,7 @@ class Pipeline:
         matches = matched.matches
         timings = dict(matched.timings_ms)
         image_matches = None
+        refined_b = matched.refined_b
         if cameras is not None:
             t0 = time.perf_counter()
             image_matches = matches
@@ -294,6 +317,8 @@ class Pipeline:
                 undistort_points(cameras[1], matches.pts_b),
                 matches.ratio,
             )
+            if refined_b is not None:
+                refined_b = _undistort_finite(cameras[1], refined_b)
             timings["undistort"] = _ms(t0)
         t0 = time.perf_counter()
         estimate = _estimate(matches, matched.size_a, matched.size_b, matched.config)
@@ -323,6 +348,7 @@ class Pipeline:
             timings,
             "image" if cameras is None else "undistorted",
             image_matches,
+            refined_b,
         )
 
     def process(
@@ -351,6 +377,15 @@ class Pipeline:
             are reported in ``result.estimate.status`` with ``F`` None, never raised.
         """
         return self.estimate(self.match(image_a, image_b, key_a, key_b, prior_timings_ms), cameras)
+
+
+def _undistort_finite(camera: CameraModel, pts: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted pixels of K of the finite rows of ``pts`` (N, 2); NaN rows stay NaN."""
+    out = np.full(pts.shape, np.nan)
+    ok = np.all(np.isfinite(pts), axis=1)
+    if np.any(ok):
+        out[ok] = undistort_points(camera, pts[ok])
+    return out
 
 
 def _estimate(

@@ -107,7 +107,13 @@ class Session:
             correction = correction_config(self.values)
         except ValueError as err:
             raise ParameterError(str(err)) from None
-        self.pipeline = Pipeline(config, cache_size=cache_size, parallel_detect=parallel_detect)
+        # a calibrated stereo rig's correction fits sub-pixel points of image b
+        self.pipeline = Pipeline(
+            config,
+            cache_size=cache_size,
+            parallel_detect=parallel_detect,
+            subpixel_b=stereo and bool(values["use_camera_info"]),
+        )
         self.calibrated = CalibratedStream(
             stereo, self.rectified, monitor, status_name, hardware_id, correction
         )

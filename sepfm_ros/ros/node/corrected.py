@@ -189,11 +189,17 @@ class CorrectionSender:
             self._guard.trigger()
 
     def _due(self, side: _SideState, now: float) -> bool:
-        """Whether ``side`` needs a call now (lock held)."""
+        """Whether ``side`` needs the executor now (lock held): a call whose answer is overdue
+        (to be counted as failed), or a new try."""
         if side.applied == self._generation:
             return False
-        if side.pending is not None:  # no answer in time: counted as a failure when tried again
+        if side.pending is not None:
             return now - side.sent_at >= APPLY_TIMEOUT_S
+        return self._try_due(side, now)
+
+    def _try_due(self, side: _SideState, now: float) -> bool:
+        """Whether ``side`` is to be called now: a correction it was not sent yet, or
+        :data:`APPLY_RETRY_S` since its last try (lock held, no call in flight)."""
         return side.tried != self._generation or now - side.sent_at >= APPLY_RETRY_S
 
     def _send(self) -> None:
@@ -208,6 +214,10 @@ class CorrectionSender:
             self._call(k, generation, infos[k] if infos else None, now)
 
     def _call(self, k: int, generation: int, info: Any, now: float) -> None:
+        """Give up a call that had no answer in time (a failure), then call ``k``'s service if
+        a try is due: at most one call per side in flight, a new try only
+        :data:`APPLY_RETRY_S` after the last (a driver that never answers is not sent a new
+        request every :data:`APPLY_TIMEOUT_S`)."""
         side, client = self._sides[k], self._clients[k]
         with self._lock:
             if side.pending is not None:  # the last call had no answer in time
@@ -215,6 +225,8 @@ class CorrectionSender:
                 side.pending.cancel()
                 side.pending = None
                 self._fail(side, f"no answer within {APPLY_TIMEOUT_S:.0f} s")
+            if not self._try_due(side, now):
+                return
             side.sent_at, side.tried = now, generation
         if not client.service_is_ready():
             with self._lock:

@@ -270,8 +270,18 @@ def test_rectified_input_gets_the_corrected_rectification_of_its_images(ros, tmp
             stored = driver.received[0]
             np.testing.assert_allclose(np.reshape(stored.k, (3, 3)), RAW_K[k])
             np.testing.assert_allclose(stored.d, RAW_D[k])
-            R_expected = np.reshape(infos[k].r, (3, 3)) @ RAW_R[k]
-            np.testing.assert_allclose(np.reshape(stored.r, (3, 3)), R_expected, atol=1e-9)
-            np.testing.assert_allclose(stored.p, infos[k].p)
+            # R: the raw frame -> stale rectified -> corrected rectified, P the corrected one,
+            # of the correction as it came into force (the corrected topics carry it from the
+            # next pair on; it moves by up to 1e-4 over the later pairs, and a wrong
+            # composition is off by 1e-2)
+            with listener.lock:
+                published = list(listener.infos[SIDES[k]].values())
+            R_stored = np.reshape(stored.r, (3, 3))
+            errors = [
+                np.abs(R_stored - np.reshape(i.r, (3, 3)) @ RAW_R[k]).max()
+                + np.abs(np.asarray(stored.p) - np.asarray(i.p)).max() / 1e3
+                for i in published
+            ]
+            assert min(errors) < 1e-9, sorted(errors)[:3]
     finally:
         proc.stop()

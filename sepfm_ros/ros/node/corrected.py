@@ -21,8 +21,9 @@ as received, R and P of a new rectification from the corrected rotation of the r
   as camera_calibration sends a calibration), asynchronously from the executor; a driver that
   stores it then publishes the corrected camera_info, which is a new calibration for the check.
   A side whose call fails (no service, no answer within :data:`APPLY_TIMEOUT_S`, or
-  ``success`` false) is counted, logged, and tried again every :data:`APPLY_RETRY_S` while the
-  correction stays in force.
+  ``success`` false) is counted, logged, and tried again :data:`APPLY_RETRY_S` after its last
+  try while the correction stays in force; a side has at most one call in flight (a driver
+  that never answers gets one request every :data:`APPLY_RETRY_S`).
 
 The services are beside each image's camera_info topic (``/cam/left/camera_info`` ->
 ``/cam/left/set_camera_info``) unless ``left/set_camera_info`` (``right/set_camera_info``) is

@@ -19,6 +19,7 @@ test_node_corrected.py: KITTI's stereo frames, the right image turned by a 1 deg
 
 from __future__ import annotations
 
+import re
 import threading
 import time
 
@@ -132,15 +133,18 @@ def test_drivers_that_do_not_answer_are_retried_every_30_s(ros, tmp_path, shared
             f"{k - n} pairs while waiting; requests to the silent driver at "
             f"{[round(a - first, 1) for a in arrivals]} s"
         )
-        assert len(arrivals) == 2, arrivals
-        assert arrivals[1] - arrivals[0] >= APPLY_RETRY_S - 1.0
+        assert len(arrivals) >= 2, arrivals  # tried again
+        gaps = np.diff(arrivals)  # s between requests: no request every 10 s
+        assert np.all(gaps >= APPLY_RETRY_S - 1.0), arrivals
         health = client.latest_health(after=1.0)
         left_value = health[f"set_camera_info {ns}/left/set_camera_info"]
         right_value = health[f"set_camera_info {ns}/right/set_camera_info"]
-        assert left_value.startswith("0 stored, 1 failed"), left_value
+        # each unanswered call failed once its 10 s ran out (the last may still be running)
+        left_failed = re.fullmatch(r"0 stored, (\d+) failed; last: .*", left_value)
+        assert left_failed and len(arrivals) - 1 <= int(left_failed[1]) <= len(arrivals)
         assert f"no answer within {APPLY_TIMEOUT_S:.0f} s" in left_value
         assert right_value.startswith("1 stored, 1 failed"), right_value
-        assert int(health["set_camera_info_failures"]) == 2
+        assert int(health["set_camera_info_failures"]) == int(left_failed[1]) + 1
         assert int(health["correction_in_force"]) == 1 and int(health["corrections"]) == 1
         out = proc.output()
         assert "the service is not available" in out

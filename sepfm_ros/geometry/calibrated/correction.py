@@ -31,7 +31,8 @@ Estimate (:func:`estimate_correction`):
 No correction (``CorrectionResult.correction is None``, with the reason) from fewer than
 :attr:`CorrectionConfig.min_pairs` pairs, from matches that cover too little of the image, from
 an interval wider than :attr:`CorrectionConfig.max_interval_deg` (the rotation is not determined),
-or when the observable rotation is within its interval of the calibration (nothing to correct).
+or when the observable rotation is not at least :attr:`CorrectionConfig.min_correction_deg` beyond
+its interval (nothing to correct).
 
 Axes: b's optical frame (x right, y down, z forward): pitch (x), yaw (y), roll (z), degrees.
 """
@@ -374,14 +375,13 @@ def estimate_correction(
             f"{np.max(half[strong]):.3f} deg > {config.max_interval_deg} deg: too few or too "
             "poor matches?)",
         )
-    observable = float(np.linalg.norm(axes[strong]))
+    # the observable rotation the interval guarantees (95 %): each axis less its half-width
+    shown = float(np.linalg.norm(np.clip(np.abs(axes[strong]) - half[strong], 0.0, None)))
     figures = (
         f"pitch {axes[0]:+.3f} +- {half[0]:.3f}, roll {axes[2]:+.3f} +- {half[2]:.3f} deg, "
         f"yaw {yaw_free:+.3f} +- {yaw_half:.3f} deg"
     )
-    if not yaw_determined and (
-        observable < config.min_correction_deg or not np.any(np.abs(axes[strong]) > half[strong])
-    ):
+    if not yaw_determined and shown < config.min_correction_deg:
         return CorrectionResult(
             None, f"no correction needed: the matches agree with the calibration ({figures})"
         )

@@ -36,8 +36,10 @@ class CorrectionConfig:
             ``s * sqrt(diag((J^T J / N)^-1))`` to each interval, in quadrature. An angle, not
             pixels: the floor the benchmark's rigs need scales with their focal length (KITTI,
             f = 719 px, and 343-px synthetic rigs both need about 0.06 mrad: 0.043 and 0.021 px).
-        min_correction_deg: no correction when the observable correction (pitch and roll) is
-            smaller than this (degrees): below it the rows move by a fraction of a pixel.
+        min_correction_deg: no correction unless the observable correction (pitch and roll)
+            is at least this (degrees) beyond its 95 % interval (the norm over the two axes of
+            ``max(|angle| - half-width, 0)``): below it the rows move by a fraction of a pixel,
+            and a rig whose calibration is a few hundredths of a degree off is not rewritten.
     """
 
     window: int = 40

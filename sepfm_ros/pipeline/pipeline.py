@@ -284,7 +284,10 @@ class Pipeline:
         refined_b = None
         if self.subpixel_b:
             t0 = time.perf_counter()
-            refined_b = refine_points_b(image_a, image_b, matches.pts_a, matches.pts_b)
+            try:
+                refined_b = refine_points_b(image_a, image_b, matches.pts_a, matches.pts_b)
+            except cv2.error:  # the correction then fits the detected points; F is unaffected
+                refined_b = None
             timings["subpixel"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
         return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b)

@@ -35,7 +35,7 @@ def refine_points_b(
     """Where the patch around each point of image a lies in image b, to sub-pixel accuracy.
 
     Args:
-        image_a, image_b: (H, W) or (H, W, 3|4) images (any size each).
+        image_a, image_b: (H, W) or (H, W, 3|4) images (their sizes may differ).
         pts_a, pts_b: (N, 2) matched points, image pixels (x right, y down).
         window_px: side of the tracked patch (px, odd, >= 3).
         max_shift_px: tracks that end further than this from ``pts_b`` (px) fail.
@@ -51,9 +51,10 @@ def refine_points_b(
     out = np.full((len(a), 2), np.nan)
     if len(a) == 0:
         return out
+    grey_a, grey_b = _same_size(to_gray(image_a), to_gray(image_b))
     tracked, status, _ = cv2.calcOpticalFlowPyrLK(
-        to_gray(image_a),
-        to_gray(image_b),
+        grey_a,
+        grey_b,
         a,
         b.copy(),
         winSize=(int(window_px), int(window_px)),
@@ -66,3 +67,18 @@ def refine_points_b(
     ok &= np.linalg.norm(moved - b.reshape(-1, 2), axis=1) <= float(max_shift_px)
     out[ok] = moved[ok]
     return out
+
+
+def _same_size(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The two (H, W) images padded with zeros on the right and bottom to one size (the tracker
+    needs it; a rig's two cameras may differ): pixel coordinates are unchanged."""
+    h, w = max(a.shape[0], b.shape[0]), max(a.shape[1], b.shape[1])
+
+    def pad(im: np.ndarray) -> np.ndarray:
+        if im.shape == (h, w):
+            return im
+        return np.asarray(
+            cv2.copyMakeBorder(im, 0, h - im.shape[0], 0, w - im.shape[1], cv2.BORDER_CONSTANT, 0)
+        )
+
+    return pad(a), pad(b)

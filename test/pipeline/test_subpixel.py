@@ -57,6 +57,12 @@ def test_colour_images_and_failed_tracks_are_nan():
     assert np.linalg.norm(refined[0] - (pts_a[0] + SHIFT)) < 0.05
     assert np.all(np.isnan(refined[1])) and np.all(np.isnan(refined[2]))
     assert refine_points_b(a, b, np.zeros((0, 2)), np.zeros((0, 2))).shape == (0, 2)
+    # cameras of different sizes (OpenCV's tracker wants one size: padded, coordinates kept)
+    small_b = b[:400, :600]
+    refined_small = refine_points_b(a, small_b, pts_a[:1], start[:1])
+    assert np.linalg.norm(refined_small[0] - (pts_a[0] + SHIFT)) < 0.05
+    refined_big = refine_points_b(small_b, a, pts_a[:1] + SHIFT, pts_a[:1])
+    assert np.linalg.norm(refined_big[0] - pts_a[0]) < 0.05
     with pytest.raises(ValueError, match="differ in length"):
         refine_points_b(a, b, pts_a, start[:2])
 

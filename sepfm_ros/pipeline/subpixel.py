@@ -78,7 +78,7 @@ def _same_size(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if im.shape == (h, w):
             return im
         return np.asarray(
-            cv2.copyMakeBorder(im, 0, h - im.shape[0], 0, w - im.shape[1], cv2.BORDER_CONSTANT, 0)
+            cv2.copyMakeBorder(im, 0, h - im.shape[0], 0, w - im.shape[1], cv2.BORDER_CONSTANT)
         )
 
     return pad(a), pad(b)

@@ -249,15 +249,15 @@ def gated_corrections(
 SHIFT_PX = 0.5  # the row shift of the right image in the error-sources table
 
 
-def clean_window_spread(clean: list[Pair], rig: Rig, cfg: CorrectionConfig, n: int):
-    """(pooled reading (3,) deg, readings of the disjoint clean windows of n pairs minus it
-    (k, 3) deg): how much a window's reading depends on its scene."""
+def clean_window_spread(clean: list[Pair], rig: Rig, cfg: CorrectionConfig, n: int) -> np.ndarray:
+    """(k, 3) deg: the readings of the disjoint clean windows of n pairs minus the whole
+    sequence's: how much a window's reading depends on its scene."""
     pooled = np.degrees(pair_rotations(rig.calib, window_of(clean), cfg).mean(axis=0))
     reads = [
         np.degrees(pair_rotations(rig.calib, window_of(clean[s : s + n]), cfg).mean(axis=0))
         for s in range(0, rig.n_frames - n + 1, n)
     ]
-    return pooled, np.array(reads).reshape(-1, 3) - pooled
+    return np.array(reads).reshape(-1, 3) - pooled
 
 
 def shift_response(pipe: Pipeline, rig: Rig, clean: list[Pair], cfg: CorrectionConfig):
@@ -473,7 +473,7 @@ def main(argv: list[str] | None = None) -> int:
                f"{SHIFT_PX} px down: change pitch / yaw / roll (deg) | exact matches shifted "
                f"{SHIFT_PX} px: change pitch / yaw / roll (deg) |",
                "|---|---|---|---|"]  # fmt: skip
-    for name, issued, n_windows, gated, n_pairs, (_, dev), (img, exact), om in clean_rows:
+    for name, issued, n_windows, gated, n_pairs, dev, (img, exact), om in clean_rows:
         clean.append(f"| {name} | {om[0]:+.3f} / {om[1]:+.3f} / {om[2]:+.3f} | "
                      f"{issued}/{n_windows} | {gated}/{n_pairs} |")  # fmt: skip
         spread = " / ".join(

@@ -22,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
@@ -285,13 +285,18 @@ class Client:
 
 
 class Ros:
-    """The test process's rclpy context, node and background executor."""
+    """An rclpy context of its own, its node and a background executor: the test process's
+    (default), or a stand-in node's (``threads`` > 1: a multi-threaded executor)."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "sepfm_live_test", threads: int = 1) -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node("sepfm_live_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = (
+            SingleThreadedExecutor(context=self.context)
+            if threads == 1
+            else MultiThreadedExecutor(num_threads=threads, context=self.context)
+        )
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()

@@ -29,12 +29,11 @@ import pytest
 
 rclpy = pytest.importorskip("rclpy")
 
-from ros_helpers import header, image_msg, start_node  # noqa: E402
+from ros_helpers import Ros, header, start_node  # noqa: E402
 from sensor_msgs.msg import CameraInfo, Image  # noqa: E402
 from sensor_msgs.srv import SetCameraInfo  # noqa: E402
 from test_node_corrected import (  # noqa: E402
     SIDES,
-    SIZE,
     Driver,
     KnockedRig,
     Listener,
@@ -43,6 +42,7 @@ from test_node_corrected import (  # noqa: E402
     inputs,
     node_args,
     rectify,
+    send_corrected,
     send_until,
     vertical_disparity,
 )
@@ -61,27 +61,14 @@ class SilentDriver:
 
     def __init__(self, service: str) -> None:
         from rclpy.callback_groups import ReentrantCallbackGroup
-        from rclpy.executors import MultiThreadedExecutor
 
         self.arrivals: list[float] = []
         self.lock = threading.Lock()
         self._release = threading.Event()
-        self.context = rclpy.Context()
-        rclpy.init(context=self.context)
-        self.node = rclpy.create_node("silent_driver", context=self.context)
-        self.srv = self.node.create_service(
+        self.ros = Ros("silent_driver", threads=4)
+        self.srv = self.ros.node.create_service(
             SetCameraInfo, service, self._on_call, callback_group=ReentrantCallbackGroup()
         )
-        self.executor = MultiThreadedExecutor(num_threads=4, context=self.context)
-        self.executor.add_node(self.node)
-        self.thread = threading.Thread(target=self._spin, daemon=True)
-        self.thread.start()
-
-    def _spin(self) -> None:
-        try:
-            self.executor.spin()
-        except Exception:  # noqa: BLE001 - context shut down at close
-            pass
 
     def _on_call(self, request, response):
         with self.lock:
@@ -96,10 +83,7 @@ class SilentDriver:
     def close(self) -> None:
         self._release.set()
         time.sleep(0.5)  # the held calls answer (to nobody) before the node goes
-        self.executor.shutdown()
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-        self.thread.join(5.0)
+        self.ros.close()
 
 
 def test_drivers_that_do_not_answer_are_retried_every_30_s(ros, tmp_path, shared_data):
@@ -180,26 +164,10 @@ class RectifiedRig(KnockedRig):
     """The knocked KITTI pairs as ``image_rect`` (KITTI's frames are rectified), each with its
     raw camera's camera_info (:func:`raw_camera_info`)."""
 
-    def send(self, k: int) -> int:
-        left_path, right_path = self.paths[k % len(self.paths)]
-        left = cv2.imread(str(left_path), cv2.IMREAD_GRAYSCALE)
-        right = cv2.warpPerspective(
-            cv2.imread(str(right_path), cv2.IMREAD_GRAYSCALE), self.warp, SIZE
-        )
-        stamp = self.t0 + k * 100_000_000
-        for j, side in enumerate(SIDES):
-            info = raw_camera_info(self.stale[j], j)
-            info.header = header(stamp, f"{side}_optical")
-            self.client.publish(f"{side}_info", info)
-        time.sleep(0.02)
-        self.messages[stamp] = []
-        for side, img in zip(SIDES, (left, right), strict=True):
-            msg = image_msg(img, stamp)
-            msg.header.frame_id = f"{side}_optical"
-            self.client.publish(side, msg)
-            self.messages[stamp].append(msg)
-        self.sent[stamp] = (left, right)
-        return stamp
+    def camera_info(self, j: int, stamp: int) -> CameraInfo:
+        info = raw_camera_info(self.stale[j], j)
+        info.header = header(stamp, f"{SIDES[j]}_optical")
+        return info
 
 
 def rect_inputs(ns: str) -> dict[str, tuple[str, type]]:
@@ -234,13 +202,7 @@ def test_rectified_input_gets_the_corrected_rectification_of_its_images(ros, tmp
     try:
         n = send_until(rig, client, in_force(listener))
         assert ", rectified images" in proc.output()  # image_rect: taken as rectified
-        after = []
-        for k in range(n, n + 3):
-            after.append(rig.send(k))
-            client.wait_info(after[-1])
-        deadline = time.monotonic() + 10.0
-        while not set(after) <= listener.corrected_stamps() and time.monotonic() < deadline:
-            time.sleep(0.05)
+        after = send_corrected(rig, client, listener, n, 3)
         assert sorted(listener.corrected_stamps()) == after
         stamp = after[-1]
         with listener.lock:

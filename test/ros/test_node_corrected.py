@@ -33,12 +33,13 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from lifecycle_msgs.msg import Transition  # noqa: E402
-from lifecycle_msgs.srv import ChangeState  # noqa: E402
+from lifecycle_msgs.msg import State, Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from ros_helpers import (  # noqa: E402
     RELIABLE,
     STARTUP_TIMEOUT,
     NodeProcess,
+    call_service,
     header,
     image_msg,
     start_node,
@@ -329,13 +330,17 @@ def test_corrected_topics_rectify_the_knocked_rig(ros, tmp_path, shared_data):
         assert all(d.received == [] for d in drivers), "apply_correction is off by default"
         # deactivated: no input, nothing republished
         change = ros.node.create_client(ChangeState, f"/{node}/change_state")
-        assert change.wait_for_service(timeout_sec=30.0)
+        get = ros.node.create_client(GetState, f"/{node}/get_state")
         deactivate = Transition(id=Transition.TRANSITION_DEACTIVATE)
-        future = change.call_async(ChangeState.Request(transition=deactivate))
+
+        def deactivated() -> ChangeState.Response | None:
+            state = call_service(get, GetState.Request(), timeout=30.0).current_state.id
+            inactive = state == State.PRIMARY_STATE_INACTIVE
+            return ChangeState.Response(success=True) if inactive else None
+
+        request = ChangeState.Request(transition=deactivate)
+        assert call_service(change, request, timeout=30.0, answered=deactivated).success
         deadline = time.monotonic() + 30.0
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert future.done() and future.result().success
         while ros.node.count_subscribers(f"{ns}/left/image_raw") and time.monotonic() < deadline:
             time.sleep(0.05)
         before = listener.count()

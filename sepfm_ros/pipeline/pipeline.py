@@ -47,6 +47,7 @@ from sepfm_ros.pipeline.config import MIN_MATCHES, PipelineConfig
 from sepfm_ros.pipeline.features import (
     Matches,
     detect,
+    detection_factor,
     make_detector,
     match_descriptors,
 )
@@ -64,6 +65,8 @@ class MatchedPair:
         timings_ms: stages so far (prior stages, "features", "match").
         config: the config the matches were made with (the estimate uses it too).
         busy_ms: milliseconds spent so far (prior stages included), counted in "total".
+        detection_factors: the factor each image was downscaled by for detection (1: full
+            size; ``PipelineConfig.feature_max_width``); the matches are in full-size pixels.
     """
 
     matches: Matches
@@ -72,6 +75,7 @@ class MatchedPair:
     timings_ms: dict[str, float]
     config: PipelineConfig
     busy_ms: float
+    detection_factors: tuple[int, int] = (1, 1)
 
 
 @dataclass
@@ -177,7 +181,8 @@ class Pipeline:
         return self._config
 
     def configure(self, config: PipelineConfig) -> None:
-        """Switch to ``config``; drops cached features when the detector changes."""
+        """Switch to ``config``; drops cached features when the detector or the detection
+        size changes."""
         old = self._config
         if self._detector is None or (config.features, config.max_features) != (
             old.features,
@@ -186,6 +191,8 @@ class Pipeline:
             self._detector = make_detector(config.features, config.max_features)
             if self._helper is not None:
                 self._detector_b = make_detector(config.features, config.max_features)
+            self._cache.clear()
+        if config.feature_max_width != old.feature_max_width:
             self._cache.clear()
         self._config = config
 
@@ -217,7 +224,9 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         cached = self._cached(key)
         assert self._detector is not None  # made by configure
-        return cached if cached is not None else self._store(key, detect(image, self._detector))
+        if cached is not None:
+            return cached
+        return self._store(key, detect(image, self._detector, self._config.feature_max_width))
 
     def _pair_features(
         self,
@@ -231,8 +240,9 @@ class Pipeline:
         if self._helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
         assert self._detector is not None and self._detector_b is not None  # made by configure
-        pending_b = self._helper.submit(detect, image_b, self._detector_b)
-        feats_a = self._store(key_a, detect(image_a, self._detector))
+        max_width = self._config.feature_max_width
+        pending_b = self._helper.submit(detect, image_b, self._detector_b, max_width)
+        feats_a = self._store(key_a, detect(image_a, self._detector, max_width))
         return feats_a, self._store(key_b, pending_b.result())
 
     def match(
@@ -265,7 +275,11 @@ class Pipeline:
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])
         timings["match"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        return MatchedPair(matches, size_a, size_b, timings, cfg, busy)
+        factors = (
+            detection_factor(size_a[0], cfg.feature_max_width),
+            detection_factor(size_b[0], cfg.feature_max_width),
+        )
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, factors)
 
     def estimate(
         self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None

@@ -466,11 +466,12 @@ class SepfmNode(ManagedNode):
             self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
     def _match(self, job: Job) -> MatchedJob | BadInput:
-        from sepfm_ros.ros.session.answer import BadInput, decode_pair
+        from sepfm_ros.ros.session.answer import BadInput
 
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
-        decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
+        # motion: image a is the previous pair's image b, converted once (same key)
+        decoded = self._session.decode(job.msg_a, job.msg_b, (job.key_a, job.key_b))
         if isinstance(decoded, BadInput):
             return decoded
         matched = self._session.match(decoded, job.key_a, job.key_b)

@@ -14,11 +14,12 @@ the GT F) per pair (medians), F-score against those positives (mean ± sd), succ
 GT-positive error < 1 px and >= 20 positives recovered), the median of the median GT-positive
 error (px, full-size pixels), the rotation and translation-direction errors of the pose taken from
 each F with the GT intrinsics (``metrics.pose_errors``; no F counts as 180 deg), and the pipeline's
-features and estimate ms per pair; then success % and median rotation error by baseline. The
-F-score and GT-positive error are each setting's own matches; the pose errors compare both
-settings against the same GT.
+features ms per detected image and estimate ms per pair; then success % and median rotation
+error by baseline. The F-score and GT-positive error are each setting's own matches; the pose
+errors compare both settings against the same GT.
 
-    python benchmarks/bench_downscale.py [--max-pairs N] [--seeds 0,1,2] [--write-docs]
+    python benchmarks/bench_downscale.py [--max-pairs N] [--seeds 0,1,2] [--data DIR]
+        [--write-docs [--doc FILE]]
 
 ``--write-docs`` rewrites this script's section of docs/benchmarks.md (see bench_docs.py).
 Figures are measured on this machine in this run; nothing is asserted.
@@ -68,20 +69,28 @@ def setting_label(max_width: int, width: int) -> str:
 
 
 def run_setting(
-    pairs: list[PairSpec], cams: dict, max_width: int, seeds: list[int], baseline: dict
-) -> list[dict]:
-    """Every pair x seed through the pipeline with ``feature_max_width`` = ``max_width``."""
+    pairs: list[PairSpec],
+    data: Path,
+    cams: dict,
+    max_width: int,
+    seeds: list[int],
+    baseline: dict,
+) -> tuple[list[dict], float]:
+    """Every pair x seed through the pipeline with ``feature_max_width`` = ``max_width``: a row
+    per run, and the features ms per detected image."""
     pipeline = Pipeline(PipelineConfig(feature_max_width=max_width), cache_size=len(cams) + 1)
     images: dict[Path, np.ndarray] = {}
     rows = []
+    features_ms = 0.0
     t0 = time.time()
     for i, pair in enumerate(pairs):
         paths = (Path(pair.img_a), Path(pair.img_b))
         a, b = (images.setdefault(p, node_grey(p)) for p in paths)
         matched = pipeline.match(a, b, key_a=paths[0], key_b=paths[1])
         m = matched.matches
+        features_ms += matched.timings_ms["features"]
         pos = positives(pair.F_gt, m.pts_a, m.pts_b)
-        P_a, P_b = (np.asarray(cams[str(p.relative_to(DATA))], dtype=np.float64) for p in paths)
+        P_a, P_b = (np.asarray(cams[str(p.relative_to(data))], dtype=np.float64) for p in paths)
         for seed in seeds:
             seeded = replace(matched, config=replace(matched.config, seed=seed))
             result = pipeline.estimate(seeded)
@@ -93,29 +102,28 @@ def run_setting(
                     "pair": pair.pair_id, "baseline": baseline[pair.pair_id],
                     "matches": len(m), "positives": int(pos.sum()), "f": met.f_score,
                     "ok": met.succeeded, "med": met.median_error if F is not None else np.inf,
-                    "rot": rot, "dir": direction, "features_ms": result.timings_ms["features"],
-                    "estimate_ms": result.timings_ms["estimate"],
+                    "rot": rot, "dir": direction, "estimate_ms": result.timings_ms["estimate"],
                 }
             )  # fmt: skip
         sys.stderr.write(f"\r  max width {max_width}: {i + 1}/{len(pairs)} pairs, "
                          f"{time.time() - t0:.0f} s")  # fmt: skip
     sys.stderr.write("\n")
-    return rows
+    return rows, features_ms / max(1, pipeline.images_detected)
 
 
-def table(settings: dict[str, list[dict]]) -> list[str]:
+def table(settings: dict[str, list[dict]], features_ms: dict[str, float]) -> list[str]:
     out = [
         "| detection | matches per pair (median) | GT positives per pair (median) "
         "| F-score (mean ± sd) | success % | median GT-positive err px (median) "
         "| rotation err deg (median / p90) | translation-direction err deg (median / p90) "
-        "| features ms per pair (median) | estimate ms per pair (median) |",
+        "| features ms per image (mean) | estimate ms per pair (median) |",
         "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for label, rows in settings.items():
         f = np.array([r["f"] for r in rows])
         rot = [r["rot"] for r in rows]
         dirs = [r["dir"] for r in rows]
-        med = [r["med"] for r in rows]
+        med = [r["med"] for r in rows if r["positives"]]  # a pair without positives has none
         out.append(
             f"| {label} | {np.median([r['matches'] for r in rows]):.0f}"
             f" | {np.median([r['positives'] for r in rows]):.0f}"
@@ -123,7 +131,7 @@ def table(settings: dict[str, list[dict]]) -> list[str]:
             f" | {np.median(med):.3f}"
             f" | {np.median(rot):.2f} / {np.percentile(rot, 90):.2f}"
             f" | {np.median(dirs):.2f} / {np.percentile(dirs, 90):.2f}"
-            f" | {np.median([r['features_ms'] for r in rows]):.1f}"
+            f" | {features_ms[label]:.1f}"
             f" | {np.median([r['estimate_ms'] for r in rows]):.1f} |"
         )
     return out
@@ -140,11 +148,11 @@ def baseline_table(settings: dict[str, list[dict]]) -> list[str]:
         cells = []
         for b in BASELINES:
             rs = [r for r in rows if r["baseline"] == b]
-            cells.append(
-                f"{100 * np.mean([r['ok'] for r in rs]):.1f} / {np.median([r['rot'] for r in rs]):.2f}"
-                if rs
-                else "n/a"
-            )
+            if not rs:
+                cells.append("n/a")
+                continue
+            success = 100 * np.mean([r["ok"] for r in rs])
+            cells.append(f"{success:.1f} / {np.median([r['rot'] for r in rs]):.2f}")
         out.append(f"| {label} | " + " | ".join(cells) + " |")
     return out
 
@@ -153,19 +161,22 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--max-pairs", type=int, default=0, help="evenly spaced pairs (0: all)")
     parser.add_argument("--seeds", default="0,1,2")
+    parser.add_argument("--data", type=Path, default=DATA, help="the data_lines folder")
     parser.add_argument(
         "--write-docs", action="store_true", help="rewrite this section of docs/benchmarks.md"
     )
+    parser.add_argument("--doc", type=Path, default=bench_docs.BENCH_DOC)
     args = parser.parse_args(argv)
-    if not DATA.is_dir():
-        print(f"shared data not found at {DATA}", file=sys.stderr)
+    data = args.data
+    if not data.is_dir():
+        print(f"shared data not found at {data}", file=sys.stderr)
         return 2
     seeds = [int(s) for s in args.seeds.split(",")]
-    all_pairs, _ = load_manifest(DATA / "pairs.json")
+    all_pairs, _ = load_manifest(data / "pairs.json")
     pairs, note = select_pairs(all_pairs, args.max_pairs)
-    raw = json.loads((DATA / "pairs.json").read_text())
+    raw = json.loads((data / "pairs.json").read_text())
     baseline = {p.pair_id: r.get("baseline", "") for p, r in zip(all_pairs, raw, strict=True)}
-    cams = json.loads((DATA / "cameras.json").read_text())
+    cams = json.loads((data / "cameras.json").read_text())
     warm_up()  # compiling is not timed
     width = int(pairs[0].size_a[0]) if pairs[0].size_a else 1536
     with bench_docs.captured_stdout() as out:
@@ -174,11 +185,13 @@ def main(argv: list[str] | None = None) -> int:
             f" {os.getloadavg()[0]:.1f} at the start."
         )
         print()
-        settings = {}
+        settings, features_ms = {}, {}
         for max_width in (0, FEATURE_MAX_WIDTH):
             label = setting_label(max_width, width)
-            settings[label] = run_setting(pairs, cams, max_width, seeds, baseline)
-        print("\n".join(table(settings)))
+            settings[label], features_ms[label] = run_setting(
+                pairs, data, cams, max_width, seeds, baseline
+            )
+        print("\n".join(table(settings, features_ms)))
         print()
         print("By baseline (parallax: small < 15 deg, medium 15-30 deg, wide >= 30 deg):")
         print()
@@ -189,7 +202,9 @@ def main(argv: list[str] | None = None) -> int:
         title = "Native high-resolution frames, features at full size and downscaled"
         command = bench_docs.command_line("bench_downscale.py", argv)
         path = bench_docs.write_section(
-            "bench_downscale", bench_docs.section("bench_downscale", title, command, out.text)
+            "bench_downscale",
+            bench_docs.section("bench_downscale", title, command, out.text),
+            args.doc,
         )
         print(f"wrote {path}", file=sys.stderr)
     return 0

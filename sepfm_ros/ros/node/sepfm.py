@@ -233,7 +233,10 @@ class SepfmNode(ManagedNode):
         self, inputs: list[tuple[str, Callable[[Any], None]]], reliability: str
     ) -> list[InputSubscription]:
         """A subscription per image input, of the transport's message type."""
-        msg_type = CompressedImage if self._transport == "compressed" else Image
+        from sepfm_ros.ros.msgs.raw_image import read_image
+
+        compressed = self._transport == "compressed"
+        msg_type = CompressedImage if compressed else Image
         return [
             InputSubscription(
                 self,
@@ -245,6 +248,8 @@ class SepfmNode(ManagedNode):
                 on_incompatible=self._on_incompatible,
                 on_created=self._on_subscribed,
                 on_switched=self._on_qos_switch,
+                # raw Images: the pixels read in place from the received bytes
+                parse=None if compressed else read_image,
             )
             for base, callback in inputs
         ]

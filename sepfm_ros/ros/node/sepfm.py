@@ -233,10 +233,9 @@ class SepfmNode(ManagedNode):
         self, inputs: list[tuple[str, Callable[[Any], None]]], reliability: str
     ) -> list[InputSubscription]:
         """A subscription per image input, of the transport's message type."""
-        from sepfm_ros.ros.msgs.raw_image import read_image
+        from sepfm_ros.ros.msgs.raw_image import read_image  # raw Images: pixels in place
 
-        compressed = self._transport == "compressed"
-        msg_type = CompressedImage if compressed else Image
+        msg_type = CompressedImage if self._transport == "compressed" else Image
         return [
             InputSubscription(
                 self,
@@ -248,8 +247,7 @@ class SepfmNode(ManagedNode):
                 on_incompatible=self._on_incompatible,
                 on_created=self._on_subscribed,
                 on_switched=self._on_qos_switch,
-                # raw Images: the pixels read in place from the received bytes
-                parse=None if compressed else read_image,
+                parse=read_image if msg_type is Image else None,
             )
             for base, callback in inputs
         ]
@@ -475,7 +473,6 @@ class SepfmNode(ManagedNode):
 
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
-        # motion: image a is the previous pair's image b, converted once (same key)
         decoded = self._session.decode(job.msg_a, job.msg_b, (job.key_a, job.key_b))
         if isinstance(decoded, BadInput):
             return decoded

@@ -52,6 +52,7 @@ from sepfm_ros.pipeline.config import MIN_MATCHES, PipelineConfig
 from sepfm_ros.pipeline.features import (
     Matches,
     detect,
+    detection_factor,
     make_detector,
     match_descriptors,
 )
@@ -72,6 +73,8 @@ class MatchedPair:
         busy_ms: milliseconds spent so far (prior stages included), counted in "total".
         refined_b: with ``subpixel_b``, (N, 2) sub-pixel points in image b of ``matches.pts_a``
             (image pixels, NaN where tracking failed); else None.
+        detection_factors: the factor each image was downscaled by for detection (1: full
+            size; ``PipelineConfig.feature_max_width``); the matches are in full-size pixels.
     """
 
     matches: Matches
@@ -81,6 +84,7 @@ class MatchedPair:
     config: PipelineConfig
     busy_ms: float
     refined_b: np.ndarray | None = None
+    detection_factors: tuple[int, int] = (1, 1)
 
 
 @dataclass
@@ -194,7 +198,8 @@ class Pipeline:
         return self._config
 
     def configure(self, config: PipelineConfig) -> None:
-        """Switch to ``config``; drops cached features when the detector changes."""
+        """Switch to ``config``; drops cached features when the detector or the detection
+        size changes."""
         old = self._config
         if self._detector is None or (config.features, config.max_features) != (
             old.features,
@@ -203,6 +208,8 @@ class Pipeline:
             self._detector = make_detector(config.features, config.max_features)
             if self._helper is not None:
                 self._detector_b = make_detector(config.features, config.max_features)
+            self._cache.clear()
+        if config.feature_max_width != old.feature_max_width:
             self._cache.clear()
         self._config = config
 
@@ -234,7 +241,9 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         cached = self._cached(key)
         assert self._detector is not None  # made by configure
-        return cached if cached is not None else self._store(key, detect(image, self._detector))
+        if cached is not None:
+            return cached
+        return self._store(key, detect(image, self._detector, self._config.feature_max_width))
 
     def _pair_features(
         self,
@@ -248,8 +257,9 @@ class Pipeline:
         if self._helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
         assert self._detector is not None and self._detector_b is not None  # made by configure
-        pending_b = self._helper.submit(detect, image_b, self._detector_b)
-        feats_a = self._store(key_a, detect(image_a, self._detector))
+        max_width = self._config.feature_max_width
+        pending_b = self._helper.submit(detect, image_b, self._detector_b, max_width)
+        feats_a = self._store(key_a, detect(image_a, self._detector, max_width))
         return feats_a, self._store(key_b, pending_b.result())
 
     def match(
@@ -290,7 +300,11 @@ class Pipeline:
                 refined_b = None
             timings["subpixel"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b)
+        factors = (
+            detection_factor(size_a[0], cfg.feature_max_width),
+            detection_factor(size_b[0], cfg.feature_max_width),
+        )
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b, factors)
 
     def estimate(
         self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None

@@ -138,7 +138,8 @@ class CorrectedTopics:
         infos = corrected_infos(models, [m.header for m in msgs])
         for k, (msg, info) in enumerate(zip(msgs, infos, strict=True)):
             self.infos[k].publish(info)
-            self.images[k].publish(msg)
+            # an image read in place (raw subscription) goes out as the bytes it came in
+            self.images[k].publish(getattr(msg, "serialized", msg))
         self.pairs_published += 1
 
     def destroy(self) -> None:

@@ -73,8 +73,6 @@ class MatchedPair:
         busy_ms: milliseconds spent so far (prior stages included), counted in "total".
         refined_b: with ``subpixel_b``, (N, 2) sub-pixel points in image b of ``matches.pts_a``
             (image pixels, NaN where tracking failed); else None.
-        detection_factors: the factor each image was downscaled by for detection (1: full
-            size; ``PipelineConfig.feature_max_width``); the matches are in full-size pixels.
     """
 
     matches: Matches
@@ -84,7 +82,15 @@ class MatchedPair:
     config: PipelineConfig
     busy_ms: float
     refined_b: np.ndarray | None = None
-    detection_factors: tuple[int, int] = (1, 1)
+
+    @property
+    def detection_factors(self) -> tuple[int, int]:
+        """The factor each image was downscaled by for detection (1: full size;
+        ``PipelineConfig.feature_max_width``); the matches are in full-size pixels."""
+        max_width = self.config.feature_max_width
+        return detection_factor(self.size_a[0], max_width), detection_factor(
+            self.size_b[0], max_width
+        )
 
 
 @dataclass
@@ -300,11 +306,7 @@ class Pipeline:
                 refined_b = None
             timings["subpixel"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        factors = (
-            detection_factor(size_a[0], cfg.feature_max_width),
-            detection_factor(size_b[0], cfg.feature_max_width),
-        )
-        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b, factors)
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b)
 
     def estimate(
         self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None

@@ -109,32 +109,34 @@ def test_node_process_calibration_check_and_audit_answer_alike(kitti_bag, ros_en
         assert calibration_levels(live.output) == offline_levels
 
 
-def test_calibration_check_takes_the_nodes_feature_parameter(kitti_bag, tmp_path):
-    """``-p features:=sift`` changes calibration_check's matches as it changes the node's: the
-    default (ORB) and SIFT give other inlier counts on the same pairs."""
-    sift = run_check(
-        CheckRequest(str(kitti_bag), given_params(PARAMS).values, max_pairs=2),
-        out=io.StringIO(),
+def _check_inliers(bag: Path, params: list[str]) -> list[int]:
+    """calibration_check's inlier count per pair on the first two pairs of ``bag``."""
+    records = run_check(
+        CheckRequest(str(bag), given_params(params).values, max_pairs=2), out=io.StringIO()
     )
-    orb = run_check(
-        CheckRequest(str(kitti_bag), given_params().values, max_pairs=2), out=io.StringIO()
-    )
-    assert len(sift) == len(orb) == 2
-    assert [r.inliers for r in sift] != [r.inliers for r in orb]
+    assert len(records) == 2
+    return [r.inliers for r in records]
 
 
-def test_calibration_check_takes_the_feature_max_width_parameter(kitti_bag):
-    """``-p feature_max_width:=640`` has calibration_check detect KITTI's 1241 px frames
-    downscaled by 2, as the node would: other inlier counts than at the default (full size)."""
-    half = run_check(
-        CheckRequest(str(kitti_bag), given_params(["feature_max_width:=640"]).values, max_pairs=2),
-        out=io.StringIO(),
-    )
-    full = run_check(
-        CheckRequest(str(kitti_bag), given_params().values, max_pairs=2), out=io.StringIO()
-    )
-    assert len(half) == len(full) == 2
-    assert [r.inliers for r in half] != [r.inliers for r in full]
+@pytest.fixture(scope="module")
+def default_inliers(kitti_bag) -> list[int]:
+    return _check_inliers(kitti_bag, [])
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        # features:=sift changes calibration_check's matches as it changes the node's
+        PARAMS,
+        # KITTI's 1241 px frames detected downscaled by 2, as the node would detect them
+        ["feature_max_width:=640"],
+    ],
+    ids=["features", "feature_max_width"],
+)
+def test_calibration_check_takes_the_nodes_pipeline_parameters(kitti_bag, default_inliers, params):
+    """A node parameter of the pipeline gives calibration_check other inlier counts on the same
+    pairs than the defaults (ORB, full size)."""
+    assert _check_inliers(kitti_bag, params) != default_inliers
 
 
 def test_session_answers_wide_frames_in_full_resolution_pixels(shared_data_lines):

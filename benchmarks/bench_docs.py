@@ -33,6 +33,7 @@ SECTIONS = {
     "bench_outliers": "python benchmarks/bench_outliers.py --write-docs",
     "bench_node": "python benchmarks/bench_node.py --write-docs",
     "bench_node_pairs": "python benchmarks/bench_node_pairs.py --write-docs",
+    "bench_downscale": "python benchmarks/bench_downscale.py --write-docs",
     "bench_robustness": "python benchmarks/bench_robustness.py --write-docs",
     "bench_rectify": "python benchmarks/bench_rectify.py --write-docs",
     "bench_engines": "python benchmarks/bench_engines.py --write-docs",

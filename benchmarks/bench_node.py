@@ -74,7 +74,9 @@ SCENES = {
         ],
     ),
 }
-# colour camera streams as a user's driver publishes them (bgr8; the 1920x1080 one upscaled)
+# colour camera streams as a user's driver publishes them (bgr8; the 1920x1080 one upscaled, so
+# it measures rate, not accuracy: bench_downscale.py measures that on native 1536x1024 frames;
+# at the default feature_max_width its features are found at 960x540)
 SCENES["templeRing 640x480 bgr8 motion"] = (
     "motion",
     [f"templeRing/templeR{k:04d}.png" for k in range(1, 48)],
@@ -322,6 +324,7 @@ def summarize(label, feeder, sent_stamps, seconds, cpu_s, threads=None):
         wait.append(timings["wait"])
     print(
         f"  {label:<19} {len(got) / seconds:6.1f} pairs/s  answered {len(got)}/{len(sent_stamps)}"
+        f" ({100.0 * len(got) / max(1, len(sent_stamps)):.1f}%)"
         f"  latency p50 {pct(latency, 50):.1f} p95 {pct(latency, 95):.1f} ms"
         f"  end-to-end p50 {pct(e2e, 50):.1f} p95 {pct(e2e, 95):.1f} ms"
         f"  max wait {max(wait, default=float('nan')):.1f} ms"
@@ -477,6 +480,7 @@ def run_scenes(args: argparse.Namespace) -> None:
     """Pipeline and node figures of every scene in ``args.scenes``, printed."""
     print(
         f"method {args.method}, features {args.features}, max_features {args.max_features},"
+        f" feature_max_width {node_values(args)['feature_max_width']},"
         f" {' '.join(args.param)} {os.cpu_count()} CPUs, load average"
         f" {os.getloadavg()[0]:.1f}, ROS_DOMAIN_ID {os.environ['ROS_DOMAIN_ID']};"
         " stage times are means"

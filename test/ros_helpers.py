@@ -22,7 +22,7 @@ from diagnostic_msgs.msg import DiagnosticArray
 from rcl_interfaces.msg import Parameter as ParameterMsg
 from rcl_interfaces.msg import ParameterType, ParameterValue
 from rcl_interfaces.srv import GetParameters, SetParameters
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import Image
@@ -43,6 +43,33 @@ STARTUP_TIMEOUT = 120.0
 
 
 # --------------------------------------------------------------------------- node subprocess
+
+
+def call_service(client, request, timeout: float = 60.0, attempt: float = 5.0, answered=None):
+    """``client``'s response to ``request``, sent again every ``attempt`` s until ``timeout`` s.
+
+    Only for requests that are safe to send twice. DDS can lose a request made just after the
+    server was discovered (``wait_for_service`` sees the server before both of the service's
+    reader/writer pairs have matched; ros2/rmw_fastrtps#390, ros2/rmw_cyclonedds#187), and then
+    the future never completes. Before each resend, ``answered()`` (when given) may return a
+    stand-in for a response whose request was carried out but whose answer was lost (a lifecycle
+    transition that took place), or None to send again.
+    """
+    assert client.wait_for_service(timeout_sec=STARTUP_TIMEOUT), f"{client.srv_name} never came"
+    deadline = time.monotonic() + timeout
+    while True:
+        future = client.call_async(request)
+        retry_at = min(time.monotonic() + attempt, deadline)
+        while not future.done() and time.monotonic() < retry_at:
+            time.sleep(0.01)
+        if future.done():
+            return future.result()
+        client.remove_pending_request(future)
+        assert time.monotonic() < deadline, f"{client.srv_name} did not answer in {timeout} s"
+        if answered is not None and (stand_in := answered()) is not None:
+            return stand_in
+
+
 class NodeProcess:
     """``python -m sepfm_ros node --ros-args ...`` (or another ``command``) as a subprocess
     with its output in a file."""
@@ -254,14 +281,6 @@ class Client:
                     f"{formed} pairs formed, {len(answered)} answered, {dropped} dropped"
                 )
 
-    def call(self, client, request, timeout: float = 10.0):
-        future = client.call_async(request)
-        deadline = time.monotonic() + timeout
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.01)
-        assert future.done(), "parameter service did not answer"
-        return future.result()
-
     def set_parameter(self, name: str, value) -> tuple[bool, str]:
         if isinstance(value, bool):
             pv = ParameterValue(type=ParameterType.PARAMETER_BOOL, bool_value=value)
@@ -272,11 +291,11 @@ class Client:
         else:
             pv = ParameterValue(type=ParameterType.PARAMETER_STRING, string_value=value)
         request = SetParameters.Request(parameters=[ParameterMsg(name=name, value=pv)])
-        result = self.call(self._set, request).results[0]
+        result = call_service(self._set, request, timeout=30.0).results[0]
         return result.successful, result.reason
 
     def get_parameter(self, name: str):
-        value = self.call(self._get, GetParameters.Request(names=[name])).values[0]
+        value = call_service(self._get, GetParameters.Request(names=[name])).values[0]
         return {
             ParameterType.PARAMETER_INTEGER: value.integer_value,
             ParameterType.PARAMETER_DOUBLE: value.double_value,
@@ -285,13 +304,18 @@ class Client:
 
 
 class Ros:
-    """The test process's rclpy context, node and background executor."""
+    """An rclpy context of its own, its node and a background executor: the test process's
+    (default), or a stand-in node's (``threads`` > 1: a multi-threaded executor)."""
 
-    def __init__(self) -> None:
+    def __init__(self, name: str = "sepfm_live_test", threads: int = 1) -> None:
         self.context = rclpy.Context()
         rclpy.init(context=self.context)
-        self.node = rclpy.create_node("sepfm_live_test", context=self.context)
-        self.executor = SingleThreadedExecutor(context=self.context)
+        self.node = rclpy.create_node(name, context=self.context)
+        self.executor = (
+            SingleThreadedExecutor(context=self.context)
+            if threads == 1
+            else MultiThreadedExecutor(num_threads=threads, context=self.context)
+        )
         self.executor.add_node(self.node)
         self.thread = threading.Thread(target=self._spin, daemon=True)
         self.thread.start()

@@ -211,7 +211,11 @@ class StreamCalibration:
         )
         status = self.monitor.update(check)
         if check.usable and check.fit is not None:
-            self.correction_window.add(pts_a, pts_b, check.fit)
+            # the correction fits the sub-pixel points of b when the pipeline tracked them
+            # (its failed tracks, NaN, are left out); the check keeps the detected ones
+            self.correction_window.add(
+                pts_a, pts_b if result.refined_b is None else result.refined_b, check.fit
+            )
         self.correction = self._correction(status)
         return CalibratedOutputs(pose, scaled, check, status, self.correction)
 

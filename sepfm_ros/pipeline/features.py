@@ -31,9 +31,11 @@ __all__ = [
     "available_features",
     "detect",
     "detector_available",
+    "detection_factor",
     "make_detector",
     "match_descriptors",
     "match_images",
+    "to_full_resolution",
     "to_gray",
     "unavailable_reason",
     "unique_matches",
@@ -74,14 +76,60 @@ def to_gray(image: np.ndarray) -> np.ndarray:
     return image
 
 
-def detect(image: np.ndarray, detector: cv2.Feature2D) -> tuple[np.ndarray, np.ndarray | None]:
-    """Detect keypoints and descriptors: returns ((K, 2) float64 points, (K, D) descriptors)."""
-    kps, desc = detector.detectAndCompute(to_gray(image), None)
+def detection_factor(width: int, max_width: int) -> int:
+    """The integer factor s >= 1 an image ``width`` px wide is downscaled by for detection:
+    ceil(width / max_width) when width > max_width > 0, else 1 (no downscale)."""
+    if max_width <= 0 or width <= max_width:
+        return 1
+    return -(-int(width) // int(max_width))
+
+
+def downscaled(gray: np.ndarray, factor: int) -> tuple[np.ndarray, tuple[float, float]]:
+    """``gray`` (H, W) resized by 1 / ``factor`` with ``cv2.INTER_AREA`` (box average).
+
+    Returns:
+        (the (ceil(H / factor), ceil(W / factor)) image, (s_x, s_y)) with s_x = W / w and
+        s_y = H / h: exactly ``factor`` when it divides the size, otherwise the scale OpenCV
+        used on that axis (:func:`to_full_resolution` maps points back with it).
+    """
+    height, width = gray.shape[:2]
+    w, h = -(-width // factor), -(-height // factor)
+    small = cv2.resize(gray, (w, h), interpolation=cv2.INTER_AREA)
+    return small, (width / w, height / h)
+
+
+def to_full_resolution(pts: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
+    """(K, 2) pixel coordinates in an image resized by 1 / scale -> the original image's pixels.
+
+    Pixel centres are at integer coordinates (OpenCV's keypoint convention); ``cv2.resize``
+    maps the source to the destination pixel centre to centre, x_small = (x + 0.5) / s - 0.5,
+    so x = (x_small + 0.5) * s - 0.5 on each axis (``scale`` = (s_x, s_y)).
+    """
+    return (np.asarray(pts, dtype=np.float64) + 0.5) * np.asarray(scale, dtype=np.float64) - 0.5
+
+
+def detect(
+    image: np.ndarray, detector: cv2.Feature2D, max_width: int = 0
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Detect keypoints and descriptors: returns ((K, 2) float64 points, (K, D) descriptors).
+
+    An image wider than ``max_width`` (> 0) is detected on a copy downscaled by the integer
+    factor :func:`detection_factor` (``cv2.INTER_AREA``); the points are then mapped back to
+    ``image``'s pixels (:func:`to_full_resolution`). ``max_width`` 0: always at full size.
+    """
+    gray = to_gray(image)
+    factor = detection_factor(gray.shape[1], max_width)
+    scale = (1.0, 1.0)
+    if factor > 1:
+        gray, scale = downscaled(gray, factor)
+    kps, desc = detector.detectAndCompute(gray, None)
     pts = (
         np.asarray(cv2.KeyPoint.convert(kps), dtype=np.float64).reshape(-1, 2)
         if kps
         else np.zeros((0, 2))
     )
+    if factor > 1:
+        pts = to_full_resolution(pts, scale)
     return pts, desc
 
 
@@ -243,9 +291,14 @@ def match_images(
     features: str = "orb",
     max_features: int = 1000,
     ratio: float = 0.8,
+    max_width: int = 0,
 ) -> Matches:
-    """Detect, describe and match two images; matches sorted best (lowest ratio) first."""
+    """Detect, describe and match two images; matches sorted best (lowest ratio) first.
+
+    ``max_width``: detect on a downscaled copy of an image wider than this (see :func:`detect`;
+    0 = full size, the default here); the matches are in the images' own pixels either way.
+    """
     detector = make_detector(features, max_features)
-    pts_a, desc_a = detect(image_a, detector)
-    pts_b, desc_b = detect(image_b, detector)
+    pts_a, desc_a = detect(image_a, detector, max_width)
+    pts_b, desc_b = detect(image_b, detector, max_width)
     return match_descriptors(pts_a, desc_a, pts_b, desc_b, features=features, ratio=ratio)

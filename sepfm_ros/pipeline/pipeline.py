@@ -18,7 +18,12 @@ threads, one pair apart, as the live node does; the result of a pair does not ch
 
 Timing stages (milliseconds): ``decode`` (when given), ``features``, ``match``, ``estimate`` (the
 whole estimator call), the estimator's own stages when it reports them (``lines`` = line-pair
-search, ``stage1``, ``stage2``, ``refine``) and ``total``.
+search, ``stage1``, ``stage2``, ``refine``), ``subpixel`` (with ``subpixel_b``) and ``total``.
+
+With ``subpixel_b`` (a calibrated stereo rig's stream), :meth:`Pipeline.match` also tracks each
+match's point of image a into image b to sub-pixel accuracy
+(:func:`~sepfm_ros.pipeline.subpixel.refine_points_b`): ``PipelineResult.refined_b``, for the
+calibration's correction; F and everything else stay those of the matches as detected.
 """
 
 from __future__ import annotations
@@ -47,9 +52,11 @@ from sepfm_ros.pipeline.config import MIN_MATCHES, PipelineConfig
 from sepfm_ros.pipeline.features import (
     Matches,
     detect,
+    detection_factor,
     make_detector,
     match_descriptors,
 )
+from sepfm_ros.pipeline.subpixel import refine_points_b
 
 ESTIMATOR_STAGES = ("lines", "stage1", "stage2", "refine")
 
@@ -64,6 +71,8 @@ class MatchedPair:
         timings_ms: stages so far (prior stages, "features", "match").
         config: the config the matches were made with (the estimate uses it too).
         busy_ms: milliseconds spent so far (prior stages included), counted in "total".
+        refined_b: with ``subpixel_b``, (N, 2) sub-pixel points in image b of ``matches.pts_a``
+            (image pixels, NaN where tracking failed); else None.
     """
 
     matches: Matches
@@ -72,6 +81,16 @@ class MatchedPair:
     timings_ms: dict[str, float]
     config: PipelineConfig
     busy_ms: float
+    refined_b: np.ndarray | None = None
+
+    @property
+    def detection_factors(self) -> tuple[int, int]:
+        """The factor each image was downscaled by for detection (1: full size;
+        ``PipelineConfig.feature_max_width``); the matches are in full-size pixels."""
+        max_width = self.config.feature_max_width
+        return detection_factor(self.size_a[0], max_width), detection_factor(
+            self.size_b[0], max_width
+        )
 
 
 @dataclass
@@ -90,6 +109,9 @@ class PipelineResult:
         coordinates: the pixels of ``matches``, ``errors`` and F: "image" (as detected) or
             "undistorted" (undistorted pixels of each camera's K, when cameras were given).
         image_matches: with cameras, the matches in image pixels as detected; else None.
+        refined_b: with the pipeline's ``subpixel_b``, (N, 2) sub-pixel points in image b of
+            ``matches.pts_a`` in the pixels of ``coordinates`` (NaN where tracking failed);
+            else None.
     """
 
     matches: Matches
@@ -101,6 +123,7 @@ class PipelineResult:
     timings_ms: dict[str, float]
     coordinates: str = "image"
     image_matches: Matches | None = None
+    refined_b: np.ndarray | None = None
 
     @property
     def ok(self) -> bool:
@@ -152,7 +175,11 @@ class Pipeline:
         config: PipelineConfig | None = None,
         cache_size: int = 4,
         parallel_detect: bool = False,
+        subpixel_b: bool = False,
     ) -> None:
+        """``subpixel_b``: also track each match into image b to sub-pixel accuracy (see the
+        module docstring)."""
+        self.subpixel_b = bool(subpixel_b)
         self._cache: OrderedDict[Hashable, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._cache_size = int(cache_size)
         self.images_detected = 0  # images whose features were computed
@@ -177,7 +204,8 @@ class Pipeline:
         return self._config
 
     def configure(self, config: PipelineConfig) -> None:
-        """Switch to ``config``; drops cached features when the detector changes."""
+        """Switch to ``config``; drops cached features when the detector or the detection
+        size changes."""
         old = self._config
         if self._detector is None or (config.features, config.max_features) != (
             old.features,
@@ -186,6 +214,8 @@ class Pipeline:
             self._detector = make_detector(config.features, config.max_features)
             if self._helper is not None:
                 self._detector_b = make_detector(config.features, config.max_features)
+            self._cache.clear()
+        if config.feature_max_width != old.feature_max_width:
             self._cache.clear()
         self._config = config
 
@@ -217,7 +247,9 @@ class Pipeline:
     ) -> tuple[np.ndarray, np.ndarray | None]:
         cached = self._cached(key)
         assert self._detector is not None  # made by configure
-        return cached if cached is not None else self._store(key, detect(image, self._detector))
+        if cached is not None:
+            return cached
+        return self._store(key, detect(image, self._detector, self._config.feature_max_width))
 
     def _pair_features(
         self,
@@ -231,8 +263,9 @@ class Pipeline:
         if self._helper is None or cached or (key_a is not None and key_a == key_b):
             return self._features(image_a, key_a), self._features(image_b, key_b)
         assert self._detector is not None and self._detector_b is not None  # made by configure
-        pending_b = self._helper.submit(detect, image_b, self._detector_b)
-        feats_a = self._store(key_a, detect(image_a, self._detector))
+        max_width = self._config.feature_max_width
+        pending_b = self._helper.submit(detect, image_b, self._detector_b, max_width)
+        feats_a = self._store(key_a, detect(image_a, self._detector, max_width))
         return feats_a, self._store(key_b, pending_b.result())
 
     def match(
@@ -264,8 +297,16 @@ class Pipeline:
             k = cfg.max_matches
             matches = Matches(matches.pts_a[:k], matches.pts_b[:k], matches.ratio[:k])
         timings["match"] = _ms(t0)
+        refined_b = None
+        if self.subpixel_b:
+            t0 = time.perf_counter()
+            try:
+                refined_b = refine_points_b(image_a, image_b, matches.pts_a, matches.pts_b)
+            except cv2.error:  # the correction then fits the detected points; F is unaffected
+                refined_b = None
+            timings["subpixel"] = _ms(t0)
         busy = _ms(t_start) + sum((prior_timings_ms or {}).values())
-        return MatchedPair(matches, size_a, size_b, timings, cfg, busy)
+        return MatchedPair(matches, size_a, size_b, timings, cfg, busy, refined_b)
 
     def estimate(
         self, matched: MatchedPair, cameras: tuple[CameraModel, CameraModel] | None = None
@@ -286,6 +327,7 @@ class Pipeline:
         matches = matched.matches
         timings = dict(matched.timings_ms)
         image_matches = None
+        refined_b = matched.refined_b
         if cameras is not None:
             t0 = time.perf_counter()
             image_matches = matches
@@ -294,6 +336,8 @@ class Pipeline:
                 undistort_points(cameras[1], matches.pts_b),
                 matches.ratio,
             )
+            if refined_b is not None:
+                refined_b = _undistort_finite(cameras[1], refined_b)
             timings["undistort"] = _ms(t0)
         t0 = time.perf_counter()
         estimate = _estimate(matches, matched.size_a, matched.size_b, matched.config)
@@ -323,6 +367,7 @@ class Pipeline:
             timings,
             "image" if cameras is None else "undistorted",
             image_matches,
+            refined_b,
         )
 
     def process(
@@ -351,6 +396,15 @@ class Pipeline:
             are reported in ``result.estimate.status`` with ``F`` None, never raised.
         """
         return self.estimate(self.match(image_a, image_b, key_a, key_b, prior_timings_ms), cameras)
+
+
+def _undistort_finite(camera: CameraModel, pts: np.ndarray) -> np.ndarray:
+    """(N, 2) undistorted pixels of K of the finite rows of ``pts`` (N, 2); NaN rows stay NaN."""
+    out = np.full(pts.shape, np.nan)
+    ok = np.all(np.isfinite(pts), axis=1)
+    if np.any(ok):
+        out[ok] = undistort_points(camera, pts[ok])
+    return out
 
 
 def _estimate(

@@ -32,6 +32,10 @@ REPO_ROOT = Path(__file__).resolve().parents[2]
 FRAMES = 24
 KNOCK_DEG = 0.5  # pitch of the right camera (about its x axis), from frame 0 on
 GT_FRAMES = (0, 8, 16)  # frames whose matches are the ground truth
+# KITTI's own calibration as the correction reads it on the clean sequence (bench_self_heal's
+# clean-rig table, tracked points: pitch -0.012, roll -0.045 deg); the truth of a knock is the
+# knock composed with it, as the benchmark takes it (KITTI's calibration is known to ~0.02 deg)
+KITTI_READING_DEG = {"pitch": -0.012, "roll": -0.045}
 
 
 def _run(bag: Path, out: Path, *extra: str) -> subprocess.CompletedProcess:
@@ -107,8 +111,10 @@ def test_knocked_rig_gets_files_that_rectify_its_rows(shared_data, knocked):
     assert summary["topics"]["left_info"] == "/left/camera_info" and summary["images"] == "raw"
     pitch, roll = fix["rotation_deg"]["pitch"], fix["rotation_deg"]["roll"]
     print(f"correction: {summary['reason']}")
-    # the pitch knocked (the target: within 0.02 deg) and no roll to speak of
-    assert abs(abs(pitch) - KNOCK_DEG) < 0.02 and abs(roll) < 0.05, fix
+    # the pitch knocked and no roll but KITTI's own, within the targets (0.02 deg of
+    # pitch, 0.05 of roll; the benchmark's roll errors are under 0.025)
+    assert abs(pitch - (KNOCK_DEG + KITTI_READING_DEG["pitch"])) < 0.02, fix
+    assert abs(roll - KITTI_READING_DEG["roll"]) < 0.025, fix
     half = fix["interval95_deg"]  # pitch and roll determined; yaw reported, wide, not applied
     assert 0 < half["pitch"] < 0.05 and 0 < half["roll"] < 0.05 and half["yaw"] > 0, fix
     assert fix["yaw_determined"] or abs(fix["rotation_deg"]["yaw"]) < 1e-3, fix  # kept

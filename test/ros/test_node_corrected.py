@@ -33,12 +33,13 @@ import pytest
 rclpy = pytest.importorskip("rclpy")
 
 from diagnostic_msgs.msg import DiagnosticArray  # noqa: E402
-from lifecycle_msgs.msg import Transition  # noqa: E402
-from lifecycle_msgs.srv import ChangeState  # noqa: E402
+from lifecycle_msgs.msg import State, Transition  # noqa: E402
+from lifecycle_msgs.srv import ChangeState, GetState  # noqa: E402
 from ros_helpers import (  # noqa: E402
     RELIABLE,
     STARTUP_TIMEOUT,
     NodeProcess,
+    call_service,
     header,
     image_msg,
     start_node,
@@ -95,9 +96,8 @@ class KnockedRig:
             cv2.imread(str(right_path), cv2.IMREAD_GRAYSCALE), self.warp, SIZE
         )
         stamp = self.t0 + k * 100_000_000
-        for side, calib in zip(SIDES, self.calibs, strict=True):
-            info = camera_info_message(calib, SIZE, header(stamp, f"{side}_optical"))
-            self.client.publish(f"{side}_info", info)
+        for j, side in enumerate(SIDES):
+            self.client.publish(f"{side}_info", self.camera_info(j, stamp))
         time.sleep(0.02)
         self.messages[stamp] = []
         for side, img in zip(SIDES, (left, right), strict=True):
@@ -110,6 +110,11 @@ class KnockedRig:
             self.messages[stamp].append(msg)
         self.sent[stamp] = (left, right)
         return stamp
+
+    def camera_info(self, j: int, stamp: int) -> CameraInfo:
+        """The camera_info camera ``j`` (0 left, 1 right) is published with: the stale one."""
+        side = SIDES[j]
+        return camera_info_message(self.calibs[j], SIZE, header(stamp, f"{side}_optical"))
 
 
 def inputs(ns: str, compressed: bool = False) -> dict[str, tuple[str, type]]:
@@ -253,6 +258,19 @@ def send_until(rig: KnockedRig, client, done, first: int = 0) -> int:
     raise AssertionError(f"not done after {MAX_PAIRS} knocked pairs")
 
 
+def send_corrected(rig: KnockedRig, client, listener: Listener, first: int, count: int) -> list:
+    """Send ``count`` pairs from ``first`` (each answered before the next) and wait up to 10 s
+    for them on the corrected topics; their stamps."""
+    sent = []
+    for k in range(first, first + count):
+        sent.append(rig.send(k))
+        client.wait_info(sent[-1])
+    deadline = time.monotonic() + 10.0
+    while not set(sent) <= listener.corrected_stamps() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    return sent
+
+
 def in_force(listener: Listener):
     def done(stamp: int) -> bool:
         return not listener.check(stamp).get("correction", "none").startswith("none")
@@ -275,13 +293,7 @@ def test_corrected_topics_rectify_the_knocked_rig(ros, tmp_path, shared_data):
         values = checks[-1]
         print(f"correction in force after {n} pairs: {values['correction']}")
         assert abs(float(values["correction_pitch_deg"])) == pytest.approx(KNOCK_DEG, abs=0.1)
-        after = []
-        for k in range(n, n + 4):
-            after.append(rig.send(k))
-            client.wait_info(after[-1])
-        deadline = time.monotonic() + 10.0
-        while not set(after) <= listener.corrected_stamps() and time.monotonic() < deadline:
-            time.sleep(0.05)
+        after = send_corrected(rig, client, listener, n, 4)
         got = listener.corrected_stamps()
         # every pair formed while the correction is in force comes back; none before it
         assert sorted(got) == after, (after, sorted(got))
@@ -318,13 +330,17 @@ def test_corrected_topics_rectify_the_knocked_rig(ros, tmp_path, shared_data):
         assert all(d.received == [] for d in drivers), "apply_correction is off by default"
         # deactivated: no input, nothing republished
         change = ros.node.create_client(ChangeState, f"/{node}/change_state")
-        assert change.wait_for_service(timeout_sec=30.0)
+        get = ros.node.create_client(GetState, f"/{node}/get_state")
         deactivate = Transition(id=Transition.TRANSITION_DEACTIVATE)
-        future = change.call_async(ChangeState.Request(transition=deactivate))
+
+        def deactivated() -> ChangeState.Response | None:
+            state = call_service(get, GetState.Request(), timeout=30.0).current_state.id
+            inactive = state == State.PRIMARY_STATE_INACTIVE
+            return ChangeState.Response(success=True) if inactive else None
+
+        request = ChangeState.Request(transition=deactivate)
+        assert call_service(change, request, timeout=30.0, answered=deactivated).success
         deadline = time.monotonic() + 30.0
-        while not future.done() and time.monotonic() < deadline:
-            time.sleep(0.05)
-        assert future.done() and future.result().success
         while ros.node.count_subscribers(f"{ns}/left/image_raw") and time.monotonic() < deadline:
             time.sleep(0.05)
         before = listener.count()
@@ -411,13 +427,7 @@ def test_compressed_input_comes_back_on_the_compressed_corrected_topic(ros, tmp_
     time.sleep(0.5)
     try:
         n = send_until(rig, client, in_force(listener))
-        after = []
-        for k in range(n, n + 2):
-            after.append(rig.send(k))
-            client.wait_info(after[-1])
-        deadline = time.monotonic() + 10.0
-        while not set(after) <= listener.corrected_stamps() and time.monotonic() < deadline:
-            time.sleep(0.05)
+        after = send_corrected(rig, client, listener, n, 2)
         assert sorted(listener.corrected_stamps()) == after
         assert ros.node.count_publishers(f"/{node}/corrected/left/image_raw") == 0
         with listener.lock:

@@ -21,6 +21,7 @@ from ros_helpers import (  # noqa: E402
     STARTUP_TIMEOUT,
     Client,
     NodeProcess,
+    call_service,
     image_msg,
 )
 from sensor_msgs.msg import Image  # noqa: E402
@@ -29,16 +30,6 @@ from sepfm_ros.ros.msgs.headers import stamp_ns  # noqa: E402
 
 RNG = np.random.default_rng(7)
 TEXTURE = (RNG.random((240, 320)) * 255).astype(np.uint8)
-
-
-def _call(ros, client, request, timeout: float = 60.0):
-    assert client.wait_for_service(timeout_sec=STARTUP_TIMEOUT), f"{client.srv_name} never came"
-    future = client.call_async(request)
-    deadline = time.monotonic() + timeout
-    while not future.done() and time.monotonic() < deadline:
-        time.sleep(0.01)
-    assert future.done(), f"{client.srv_name} did not answer"
-    return future.result()
 
 
 class Lifecycle:
@@ -50,7 +41,7 @@ class Lifecycle:
         self.get = ros.node.create_client(GetState, f"/{name}/get_state")
 
     def state(self, timeout: float = 60.0) -> int:
-        return _call(self.ros, self.get, GetState.Request(), timeout).current_state.id
+        return call_service(self.get, GetState.Request(), timeout).current_state.id
 
     def wait_state(self, state_id: int, timeout: float = STARTUP_TIMEOUT) -> None:
         deadline = time.monotonic() + timeout
@@ -62,11 +53,18 @@ class Lifecycle:
         """Whether the node refuses ``transition_id`` (not one of its state's) and stays."""
         before = self.state()
         request = ChangeState.Request(transition=Transition(id=transition_id))
-        return not _call(self.ros, self.change, request).success and self.state() == before
+        return not call_service(self.change, request).success and self.state() == before
 
     def transition(self, transition_id: int, expect: int) -> None:
         request = ChangeState.Request(transition=Transition(id=transition_id))
-        assert _call(self.ros, self.change, request).success, f"transition {transition_id}"
+
+        def took_place() -> ChangeState.Response | None:
+            # the transition was carried out and only its answer lost: sending it again
+            # would be refused from the new state
+            return ChangeState.Response(success=True) if self.state() == expect else None
+
+        response = call_service(self.change, request, answered=took_place)
+        assert response.success, f"transition {transition_id}"
         assert self.state() == expect
 
 

@@ -109,15 +109,56 @@ def test_node_process_calibration_check_and_audit_answer_alike(kitti_bag, ros_en
         assert calibration_levels(live.output) == offline_levels
 
 
-def test_calibration_check_takes_the_nodes_feature_parameter(kitti_bag, tmp_path):
-    """``-p features:=sift`` changes calibration_check's matches as it changes the node's: the
-    default (ORB) and SIFT give other inlier counts on the same pairs."""
-    sift = run_check(
-        CheckRequest(str(kitti_bag), given_params(PARAMS).values, max_pairs=2),
-        out=io.StringIO(),
+def _check_inliers(bag: Path, params: list[str]) -> list[int]:
+    """calibration_check's inlier count per pair on the first two pairs of ``bag``."""
+    records = run_check(
+        CheckRequest(str(bag), given_params(params).values, max_pairs=2), out=io.StringIO()
     )
-    orb = run_check(
-        CheckRequest(str(kitti_bag), given_params().values, max_pairs=2), out=io.StringIO()
-    )
-    assert len(sift) == len(orb) == 2
-    assert [r.inliers for r in sift] != [r.inliers for r in orb]
+    assert len(records) == 2
+    return [r.inliers for r in records]
+
+
+@pytest.fixture(scope="module")
+def default_inliers(kitti_bag) -> list[int]:
+    return _check_inliers(kitti_bag, [])
+
+
+@pytest.mark.parametrize(
+    "params",
+    [
+        # features:=sift changes calibration_check's matches as it changes the node's
+        PARAMS,
+        # KITTI's 1241 px frames detected downscaled by 2, as the node would detect them
+        ["feature_max_width:=640"],
+    ],
+    ids=["features", "feature_max_width"],
+)
+def test_calibration_check_takes_the_nodes_pipeline_parameters(kitti_bag, default_inliers, params):
+    """A node parameter of the pipeline gives calibration_check other inlier counts on the same
+    pairs than the defaults (ORB, full size)."""
+    assert _check_inliers(kitti_bag, params) != default_inliers
+
+
+def test_session_answers_wide_frames_in_full_resolution_pixels(shared_data_lines):
+    """A 1536x1024 camera with ``feature_max_width:=1280``: detected at 768x512, answered in
+    the frames' own pixels (sizes, matches) by the one answer path of every entry point."""
+    import cv2
+    from std_msgs.msg import Header
+
+    from sepfm_ros.ros.msgs.image_conversion import numpy_to_image
+    from sepfm_ros.ros.session.answer import PairHeaders
+    from sepfm_ros.ros.session.session import Session
+
+    frames = [
+        cv2.imread(str(shared_data_lines / f"fountain-P11/000{k}.jpg"), cv2.IMREAD_GRAYSCALE)
+        for k in (0, 1)
+    ]
+    values = given_params(["mode:=motion", "feature_max_width:=1280"]).values
+    session = Session(values, stereo=False, topics=["/image_raw"])
+    header = Header(frame_id="camera")
+    msgs = [numpy_to_image(f, "mono8", header) for f in frames]
+    answer = session.answer(PairHeaders(header, header, header), *msgs, keys=(1, 2))
+    assert answer.result is not None and answer.result.ok
+    assert (answer.estimate.width_a, answer.estimate.height_a) == (1536, 1024)
+    u_a = np.array([m.u_a for m in answer.matches.matches])
+    assert len(u_a) >= 50 and u_a.max() > 1000  # full-size pixels, not 768 px wide ones

@@ -20,7 +20,7 @@ Estimate (:func:`estimate_correction`):
    of the rig;
 3. the estimate is the mean of the kept pairs' fits; the 95 % interval per axis is Student's
    t over them, ``t_0.975(n-1) * std / sqrt(n)`` (matches of one pair are correlated, pairs
-   much less), with a systematic floor :attr:`CorrectionConfig.systematic_px` in quadrature;
+   much less), with a systematic floor :attr:`CorrectionConfig.systematic_mrad` in quadrature;
 4. yaw (the rotation about the axis normal to the baseline and b's optical axis) moves points
    along the epipolar lines: a disparity bias, not an epipolar error; only the second-order
    row shift ``angle * (u - cx)(v - cy) / f`` shows it, which a residual distortion or a
@@ -31,7 +31,8 @@ Estimate (:func:`estimate_correction`):
 No correction (``CorrectionResult.correction is None``, with the reason) from fewer than
 :attr:`CorrectionConfig.min_pairs` pairs, from matches that cover too little of the image, from
 an interval wider than :attr:`CorrectionConfig.max_interval_deg` (the rotation is not determined),
-or when the observable rotation is within its interval of the calibration (nothing to correct).
+or when the observable rotation is not at least :attr:`CorrectionConfig.min_correction_deg` beyond
+its interval (nothing to correct).
 
 Axes: b's optical frame (x right, y down, z forward): pitch (x), yaw (y), roll (z), degrees.
 """
@@ -293,15 +294,22 @@ def _observable(v: np.ndarray, weak: np.ndarray) -> np.ndarray:
 
 
 def _half_widths(
-    fits: np.ndarray, info: np.ndarray, n_matches: int, basis: np.ndarray, config: CorrectionConfig
+    fits: np.ndarray,
+    info: np.ndarray,
+    n_matches: int,
+    basis: np.ndarray,
+    config: CorrectionConfig,
+    focal_px: float,
 ) -> np.ndarray:
     """(3,) 95 % half-widths (deg) of the mean of the (n, 3) per-pair fits (rad): Student's t
-    over the pairs, and the systematic floor in quadrature, for rotations in ``basis`` (3, k)."""
+    over the pairs, and the systematic floor in quadrature, for rotations in ``basis`` (3, k);
+    ``focal_px``: camera b's focal length (px), which turns the floor's angle into pixels."""
     n = len(fits)
     stat = float(student_t.ppf(0.975, n - 1)) * fits.std(axis=0, ddof=1) / np.sqrt(n)
     sub = basis.T @ info @ basis / max(n_matches, 1)
     cov = basis @ np.linalg.pinv(sub) @ basis.T
-    sys = config.systematic_px * np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    sys_px = config.systematic_mrad * 1e-3 * focal_px
+    sys = sys_px * np.sqrt(np.clip(np.diag(cov), 0.0, None))
     return np.asarray(np.degrees(np.sqrt(stat**2 + sys**2)))
 
 
@@ -349,7 +357,8 @@ def estimate_correction(
     info = np.sum([f.info for f in kept], axis=0)
     n_matches = int(sum(f.n for f in kept))
     mean = free[keep].mean(axis=0)
-    half = _half_widths(free[keep], info, n_matches, np.eye(3), config)
+    focal = float(np.mean(np.diag(calib.model_b.K)[:2]))
+    half = _half_widths(free[keep], info, n_matches, np.eye(3), config, focal)
     weak_index = int(np.argmax(np.abs(weak)))
     strong = [i for i in range(3) if i != weak_index]
     yaw_free = float(np.degrees(mean @ weak))
@@ -363,17 +372,16 @@ def estimate_correction(
         return CorrectionResult(
             None,
             "degenerate window: the matches do not determine the rotation (95 % interval "
-            f"{np.max(half[strong]):.3f} deg > {config.max_interval_deg} deg: a plane, no "
-            "parallax or too little texture?)",
+            f"{np.max(half[strong]):.3f} deg > {config.max_interval_deg} deg: too few or too "
+            "poor matches?)",
         )
-    observable = float(np.linalg.norm(axes[strong]))
+    # the observable rotation the interval guarantees (95 %): each axis less its half-width
+    shown = float(np.linalg.norm(np.clip(np.abs(axes[strong]) - half[strong], 0.0, None)))
     figures = (
         f"pitch {axes[0]:+.3f} +- {half[0]:.3f}, roll {axes[2]:+.3f} +- {half[2]:.3f} deg, "
         f"yaw {yaw_free:+.3f} +- {yaw_half:.3f} deg"
     )
-    if not yaw_determined and (
-        observable < config.min_correction_deg or not np.any(np.abs(axes[strong]) > half[strong])
-    ):
+    if not yaw_determined and shown < config.min_correction_deg:
         return CorrectionResult(
             None, f"no correction needed: the matches agree with the calibration ({figures})"
         )

@@ -55,6 +55,15 @@ GENERIC_ENCODINGS: tuple[str, ...] = tuple(
 SUPPORTED_ENCODINGS: tuple[str, ...] = NAMED_ENCODINGS + GENERIC_ENCODINGS
 
 COLOR_SPACES = ("mono8", "bgr8")
+# 8-bit colour layouts -> mono8: one cv2.cvtColor call, which reads padded rows in place and
+# writes the final array (what rosbags-image's convert_color calls for these, without the copy
+# to contiguous rows)
+_TO_GREY = {
+    "bgr8": cv2.COLOR_BGR2GRAY,
+    "rgb8": cv2.COLOR_RGB2GRAY,
+    "bgra8": cv2.COLOR_BGRA2GRAY,
+    "rgba8": cv2.COLOR_RGBA2GRAY,
+}
 
 # Kinds of bad input, used as keys for error counting (diagnostics) and logging once per kind.
 ERROR_KINDS = (
@@ -373,6 +382,10 @@ def _convert(
             value_range = intensity_range([img])
         img = to_uint8(img, *value_range)
     enc = _eight_bit_encoding(encoding, nchan)
+    if color_space == "mono8" and enc in _TO_GREY:
+        return cv2.cvtColor(img, _TO_GREY[enc])  # padded rows read in place, no copy
+    if enc == color_space:
+        return img  # already mono8 / bgr8: the pixels as they are (a view of the data)
     if not img.flags.c_contiguous:
         img = np.ascontiguousarray(img)
     try:
@@ -474,13 +487,35 @@ def pair_to_numpy(
         ImageDecodeError: either message is malformed (see :func:`check_image`,
             :func:`check_compressed`).
     """
-    img_a, enc_a = _decode(msg_a, color_space)
-    img_b, enc_b = _decode(msg_b, color_space)
-    value_range = intensity_range([img_a, img_b])
-    return (
-        _convert(img_a, enc_a, color_space, value_range),
-        _convert(img_b, enc_b, color_space, value_range),
-    )
+    image_a, image_b, _ = pair_decoded(msg_a, msg_b, color_space)
+    return image_a, image_b
+
+
+def pair_decoded(
+    msg_a: Any, msg_b: Any, color_space: str = "mono8", image_a: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`pair_to_numpy`, reusing image a when an earlier pair decoded it.
+
+    Args:
+        image_a: ``msg_a`` as an earlier call returned it for a message whose pixels were 8-bit
+            (its third value True): then ``msg_a`` is not decoded again. An 8-bit image takes
+            no part in the pair's intensity range, so the result is the same as without it.
+
+    Returns:
+        (image a, image b, reusable): ``reusable`` is True when ``msg_b``'s pixels were 8-bit,
+        so image b may be passed as ``image_a`` of a later pair with ``msg_b`` as image a.
+    """
+    if image_a is not None:
+        img_b, enc_b = _decode(msg_b, color_space)
+        value_range = intensity_range([img_b])
+        converted_a = image_a
+    else:
+        img_a, enc_a = _decode(msg_a, color_space)
+        img_b, enc_b = _decode(msg_b, color_space)
+        value_range = intensity_range([img_a, img_b])
+        converted_a = _convert(img_a, enc_a, color_space, value_range)
+    converted_b = _convert(img_b, enc_b, color_space, value_range)
+    return converted_a, converted_b, img_b.dtype == np.uint8
 
 
 def numpy_to_image(array: np.ndarray, encoding: str, header: Any = None) -> Any:

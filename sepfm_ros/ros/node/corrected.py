@@ -21,8 +21,9 @@ as received, R and P of a new rectification from the corrected rotation of the r
   as camera_calibration sends a calibration), asynchronously from the executor; a driver that
   stores it then publishes the corrected camera_info, which is a new calibration for the check.
   A side whose call fails (no service, no answer within :data:`APPLY_TIMEOUT_S`, or
-  ``success`` false) is counted, logged, and tried again every :data:`APPLY_RETRY_S` while the
-  correction stays in force.
+  ``success`` false) is counted, logged, and tried again :data:`APPLY_RETRY_S` after its last
+  try while the correction stays in force; a side has at most one call in flight (a driver
+  that never answers gets one request every :data:`APPLY_RETRY_S`).
 
 The services are beside each image's camera_info topic (``/cam/left/camera_info`` ->
 ``/cam/left/set_camera_info``) unless ``left/set_camera_info`` (``right/set_camera_info``) is
@@ -137,7 +138,8 @@ class CorrectedTopics:
         infos = corrected_infos(models, [m.header for m in msgs])
         for k, (msg, info) in enumerate(zip(msgs, infos, strict=True)):
             self.infos[k].publish(info)
-            self.images[k].publish(msg)
+            # an image read in place (raw subscription) goes out as the bytes it came in
+            self.images[k].publish(getattr(msg, "serialized", msg))
         self.pairs_published += 1
 
     def destroy(self) -> None:
@@ -189,11 +191,17 @@ class CorrectionSender:
             self._guard.trigger()
 
     def _due(self, side: _SideState, now: float) -> bool:
-        """Whether ``side`` needs a call now (lock held)."""
+        """Whether ``side`` needs the executor now (lock held): a call whose answer is overdue
+        (to be counted as failed), or a new try."""
         if side.applied == self._generation:
             return False
-        if side.pending is not None:  # no answer in time: counted as a failure when tried again
+        if side.pending is not None:
             return now - side.sent_at >= APPLY_TIMEOUT_S
+        return self._try_due(side, now)
+
+    def _try_due(self, side: _SideState, now: float) -> bool:
+        """Whether ``side`` is to be called now: a correction it was not sent yet, or
+        :data:`APPLY_RETRY_S` since its last try (lock held, no call in flight)."""
         return side.tried != self._generation or now - side.sent_at >= APPLY_RETRY_S
 
     def _send(self) -> None:
@@ -208,6 +216,10 @@ class CorrectionSender:
             self._call(k, generation, infos[k] if infos else None, now)
 
     def _call(self, k: int, generation: int, info: Any, now: float) -> None:
+        """Give up a call that had no answer in time (a failure), then call ``k``'s service if
+        a try is due: at most one call per side in flight, a new try only
+        :data:`APPLY_RETRY_S` after the last (a driver that never answers is not sent a new
+        request every :data:`APPLY_TIMEOUT_S`)."""
         side, client = self._sides[k], self._clients[k]
         with self._lock:
             if side.pending is not None:  # the last call had no answer in time
@@ -215,6 +227,8 @@ class CorrectionSender:
                 side.pending.cancel()
                 side.pending = None
                 self._fail(side, f"no answer within {APPLY_TIMEOUT_S:.0f} s")
+            if not self._try_due(side, now):
+                return
             side.sent_at, side.tried = now, generation
         if not client.service_is_ready():
             with self._lock:

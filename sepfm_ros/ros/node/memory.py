@@ -6,12 +6,16 @@ two native effects grew the node by ~60 MB while the Python heap stayed flat:
 - glibc's malloc raises its mmap threshold every time a large block is freed (up to 32 MB), so
   later image buffers come from the heap arenas instead of their own mappings, and the freed
   blocks stay resident as fragmentation. :func:`configure_malloc` fixes the thresholds (which
-  also turns that adjustment off): every block >= 1 MiB is its own mapping, returned to the
-  system on free. 1 MiB rather than glibc's initial 128 KiB: at 128 KiB every 640x480 image,
-  image pyramid level and Hough image of every pair was a fresh mapping, page-faulted and
-  zeroed again (node at 30 Hz, templeRing: 4.5-5.6 ms of system time per pair, at 1 MiB 2.0;
-  node CPU per pair 22.7 -> 17.6 ms), while the fuzz streams' growth stayed small (10,000
-  Images +6.7 MB, 3,000 CompressedImages +3.0 MB; +5.7 and +1.5 MB at 128 KiB).
+  also turns that adjustment off): every block >= 16 MiB is its own mapping, returned to the
+  system on free, and a free heap top beyond 64 MiB is returned at once (the rest with every
+  diagnostics report, :func:`release_free_memory`). Smaller fixed thresholds made every frame
+  buffer a fresh mapping, page-faulted and zeroed again on every pair: at glibc's initial
+  128 KiB each 640x480 image, pyramid level and Hough image (node at 30 Hz, templeRing: 4.5-5.6
+  ms of system time per pair, 2.0 at 1 MiB; node CPU per pair 22.7 -> 17.6 ms); at 1 MiB a
+  1920x1080 bgr8 frame (6.2 MB) and its grey image (2.1 MB): a 1080p camera at 30 Hz got 28 %
+  of its pairs answered at 142 ms of node CPU per pair, at 16 / 64 MiB 75 % at 46 ms
+  (bench_node). The fuzz streams' growth stays small: 10,000 Images +10.4 MB, 3,000
+  CompressedImages +6.6 MB (+6.7 and +3.0 at 1 MiB; test_robustness_live allows 50).
 - rmw_fastrtps gives every subscription a history whose payload buffers are preallocated and
   grown to the largest sample seen, and never shrink; with a reliable keep-all input the pool
   holds as many buffers as samples ever waited at once. :func:`sepfm_ros.ros.node.dds.configure_dds`
@@ -30,8 +34,8 @@ import ctypes.util
 # glibc's mallopt parameters (malloc.h)
 M_TRIM_THRESHOLD = -1
 M_MMAP_THRESHOLD = -3
-MMAP_THRESHOLD_BYTES = 1024 * 1024  # blocks from here on get their own mapping (see above)
-TRIM_THRESHOLD_BYTES = 1024 * 1024  # free heap top beyond this is returned at once
+MMAP_THRESHOLD_BYTES = 16 * 1024 * 1024  # blocks from here on get their own mapping (see above)
+TRIM_THRESHOLD_BYTES = 64 * 1024 * 1024  # a free heap top beyond this is returned at once
 
 
 def _load_libc():
@@ -54,9 +58,9 @@ _LIBC = _load_libc()
 def configure_malloc() -> bool:
     """Fix glibc's mmap and trim thresholds (process-wide); False when not on glibc.
 
-    Call it early, before images flow. Large buffers (>= 1 MiB: any image above about 1 Mpx of
-    8 bits) then get their own mapping and go back to the system when freed, whatever sizes
-    came before; smaller ones are reused from the heap.
+    Call it early, before images flow. Large buffers (>= 16 MiB: a 4K bgr8 frame, not a 1080p
+    one) then get their own mapping and go back to the system when freed, whatever sizes came
+    before; smaller ones are reused from the heap.
     """
     if _LIBC is None:
         return False

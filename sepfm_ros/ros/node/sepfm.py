@@ -233,6 +233,8 @@ class SepfmNode(ManagedNode):
         self, inputs: list[tuple[str, Callable[[Any], None]]], reliability: str
     ) -> list[InputSubscription]:
         """A subscription per image input, of the transport's message type."""
+        from sepfm_ros.ros.msgs.raw_image import read_image  # raw Images: pixels in place
+
         msg_type = CompressedImage if self._transport == "compressed" else Image
         return [
             InputSubscription(
@@ -245,6 +247,7 @@ class SepfmNode(ManagedNode):
                 on_incompatible=self._on_incompatible,
                 on_created=self._on_subscribed,
                 on_switched=self._on_qos_switch,
+                parse=read_image if msg_type is Image else None,
             )
             for base, callback in inputs
         ]
@@ -466,11 +469,11 @@ class SepfmNode(ManagedNode):
             self._bad_input(internal_error_kind(err), f"cannot publish an answer: {err}")
 
     def _match(self, job: Job) -> MatchedJob | BadInput:
-        from sepfm_ros.ros.session.answer import BadInput, decode_pair
+        from sepfm_ros.ros.session.answer import BadInput
 
         started = time.monotonic()
         wait_ms = (started - job.received) * 1e3
-        decoded = decode_pair(job.msg_a, job.msg_b, self._mode == "stereo")
+        decoded = self._session.decode(job.msg_a, job.msg_b, (job.key_a, job.key_b))
         if isinstance(decoded, BadInput):
             return decoded
         matched = self._session.match(decoded, job.key_a, job.key_b)

@@ -87,6 +87,9 @@ class InputSubscription:
             (again after each switch).
         on_switched: ``auto``: called with (topic, old reliability name, new reliability name)
             when the subscription was recreated for the publishers now on the topic.
+        parse: when given, the subscription takes the serialized message (rclpy's ``raw``) and
+            ``callback`` gets ``parse(bytes)`` (e.g. :func:`~..msgs.raw_image.read_image`,
+            which reads an Image's pixels in place instead of rclpy's three copies).
     """
 
     def __init__(
@@ -100,6 +103,7 @@ class InputSubscription:
         on_incompatible: Callable[[str, str], None],
         on_created: Callable[[str, str], None],
         on_switched: Callable[[str, str, str], None] | None = None,
+        parse: Callable[[bytes], Any] | None = None,
     ) -> None:
         if reliability not in RELIABILITIES:
             raise ValueError(f"reliability must be one of {RELIABILITIES}; got {reliability!r}")
@@ -107,6 +111,7 @@ class InputSubscription:
         self.topic = topic
         self._msg_type = msg_type
         self._callback = callback
+        self._parse = parse
         self._on_lost = on_lost
         self._on_incompatible = on_incompatible
         self._on_created = on_created
@@ -201,13 +206,15 @@ class InputSubscription:
             incompatible_qos=self._incompatible,
         )
         self._requested = policy
+        parse, callback = self._parse, self._callback
         self.subscription = self._node.create_subscription(
             self._msg_type,
             self.topic,
-            self._callback,
+            callback if parse is None else lambda data: callback(parse(data)),
             input_qos(policy),
             event_callbacks=events,
             qos_overriding_options=options,
+            raw=parse is not None,
         )
         reliability = self.subscription.qos_profile.reliability
         self._on_created(self.topic, _reliability_name(reliability))

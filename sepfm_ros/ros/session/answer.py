@@ -37,7 +37,8 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     pass
 import math
-from collections.abc import Mapping
+from collections import OrderedDict
+from collections.abc import Hashable, Mapping
 from dataclasses import dataclass
 
 import numpy as np
@@ -64,7 +65,7 @@ from sepfm_ros.ros.msgs.image_conversion import (
     ImageDecodeError,
     check_compressed,
     check_image,
-    pair_to_numpy,
+    pair_decoded,
 )
 from sepfm_ros.ros.session.calibrated import CalibratedStream, CamerasUpdate
 
@@ -189,17 +190,59 @@ def precheck(msg: Any) -> BadInput | None:
     return None
 
 
-def decode_pair(msg_a: Any, msg_b: Any, stereo: bool) -> DecodedPair | BadInput:
+class DecodedFrames:
+    """The mono8 images of the latest frames by key, so that a frame that is image b of one pair
+    and image a of the next (motion mode) is converted once.
+
+    Only images of 8-bit pixels are kept: their mono8 image does not depend on the pair's other
+    image (deeper pixels are mapped with the pair's range, see ``pair_to_numpy``), so a kept
+    image equals what decoding the message again gives. Not thread-safe: one decoding thread.
+    """
+
+    def __init__(self, size: int = 2) -> None:
+        self._images: OrderedDict[Hashable, np.ndarray] = OrderedDict()
+        self._size = int(size)
+        self.reused = 0  # images taken from here instead of decoded again
+
+    def get(self, key: Hashable | None) -> np.ndarray | None:
+        """The kept (H, W) uint8 image of frame ``key`` (None: not kept, or no key)."""
+        if key is None or key not in self._images:
+            return None
+        self.reused += 1
+        return self._images[key]
+
+    def put(self, key: Hashable | None, image: np.ndarray) -> None:
+        """Keep frame ``key``'s mono8 image (the oldest kept one goes beyond ``size``)."""
+        if key is None or self._size <= 0:
+            return
+        self._images[key] = image
+        self._images.move_to_end(key)
+        while len(self._images) > self._size:
+            self._images.popitem(last=False)
+
+
+def decode_pair(
+    msg_a: Any,
+    msg_b: Any,
+    stereo: bool,
+    frames: DecodedFrames | None = None,
+    keys: tuple[Hashable | None, Hashable | None] = (None, None),
+) -> DecodedPair | BadInput:
     """Decode a pair's Image/CompressedImage messages to mono8 with one contrast for the pair.
 
     A stereo rig's two cameras may differ in size (F relates any two views); one camera whose
     frame size changed between the two frames gives a :class:`BadInput` of kind ``size_change``.
+    With ``frames`` and the frames' ``keys``, image a is taken from ``frames`` when an earlier
+    pair decoded it (motion mode: the previous pair's image b), and image b is kept there.
     """
     t0 = time.perf_counter()
+    known_a = frames.get(keys[0]) if frames is not None else None
     try:
-        image_a, image_b = pair_to_numpy(msg_a, msg_b, "mono8")
+        image_a, image_b, reusable = pair_decoded(msg_a, msg_b, "mono8", known_a)
     except ImageDecodeError as err:
         return BadInput(err.kind, str(err))
+    if frames is not None and reusable:
+        frames.put(keys[1], image_b)
     decode_ms = (time.perf_counter() - t0) * 1e3
     size_a, size_b = _size(image_a), _size(image_b)
     if not stereo and size_a != size_b:

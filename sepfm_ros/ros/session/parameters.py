@@ -23,7 +23,7 @@ from rcl_interfaces.msg import (
 from sepfm_ros.geometry.calibrated.correction_config import CorrectionConfig
 from sepfm_ros.geometry.calibrated.monitor import MonitorConfig
 from sepfm_ros.geometry.options import DEFAULT_METHOD, METHODS, EstimatorOptions
-from sepfm_ros.pipeline.config import FEATURES, PipelineConfig
+from sepfm_ros.pipeline.config import FEATURE_MAX_WIDTH, FEATURES, PipelineConfig
 
 NODE_NAME = "sepfm"
 MODES = ("stereo", "motion")
@@ -143,6 +143,15 @@ PARAMS: dict[str, ParamSpec] = {
         choices=FEATURES,
     ),
     "max_features": ParamSpec(1000, "keypoints per image (orb, sift)", 8, 100000),
+    "feature_max_width": ParamSpec(
+        FEATURE_MAX_WIDTH,
+        "features of an image wider than this are detected on a copy downscaled by the integer"
+        " factor ceil(width / feature_max_width) (INTER_AREA), their keypoints mapped back to"
+        " full-resolution pixels, so matches and F stay in the image's pixels; px (0 = always"
+        " full size)",
+        0,
+        100000,
+    ),
     "ratio": ParamSpec(0.8, "Lowe ratio-test bound for matches", 0.05, 1.0),
     "max_matches": ParamSpec(0, "keep at most this many best matches (0 = all)", 0, 100000),
     "method": ParamSpec(DEFAULT_METHOD, "estimator method", choices=METHODS),
@@ -269,6 +278,7 @@ def always_on_default(values: Mapping[str, Any]) -> bool:
 PIPELINE_PARAMS = {
     "features": "features",
     "max_features": "max_features",
+    "feature_max_width": "feature_max_width",
     "ratio": "ratio",
     "max_matches": "max_matches",
     "method": "method",

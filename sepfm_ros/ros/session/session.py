@@ -27,6 +27,7 @@ from sepfm_ros.pipeline.pipeline import MatchedPair, Pipeline, PipelineConfig
 from sepfm_ros.ros.session.answer import (
     AnswerSettings,
     BadInput,
+    DecodedFrames,
     DecodedPair,
     PairAnswer,
     PairCalibration,
@@ -107,7 +108,15 @@ class Session:
             correction = correction_config(self.values)
         except ValueError as err:
             raise ParameterError(str(err)) from None
-        self.pipeline = Pipeline(config, cache_size=cache_size, parallel_detect=parallel_detect)
+        # a calibrated stereo rig's correction fits sub-pixel points of image b
+        self.pipeline = Pipeline(
+            config,
+            cache_size=cache_size,
+            parallel_detect=parallel_detect,
+            subpixel_b=stereo and bool(values["use_camera_info"]),
+        )
+        # motion: each frame converted to mono8 once (image b of a pair, image a of the next)
+        self.frames = DecodedFrames(int(values["frame_gap"]) + 1)
         self.calibrated = CalibratedStream(
             stereo, self.rectified, monitor, status_name, hardware_id, correction
         )
@@ -143,6 +152,13 @@ class Session:
         return AnswerSettings.of(config or self.pipeline.config, publish_unreliable)
 
     # ---------------------------------------------------------------- a pair
+    def decode(
+        self, msg_a: Any, msg_b: Any, keys: tuple[Hashable, Hashable] = (None, None)
+    ) -> DecodedPair | BadInput:
+        """A pair's mono8 images (:func:`~.answer.decode_pair`); a frame already decoded as
+        the previous pair's image b (same key) is not decoded again. One decoding thread."""
+        return decode_pair(msg_a, msg_b, self.stereo, self.frames, keys)
+
     def match(
         self, decoded: DecodedPair, key_a: Hashable = None, key_b: Hashable = None
     ) -> MatchedPair:
@@ -185,7 +201,7 @@ class Session:
         """The whole path for one pair of image messages: decode, match, estimate, compose.
         Never raises on a pair: undecodable images give the failure record, an unexpected error
         the ``STATUS_INTERNAL_ERROR`` record."""
-        return self.answer_decoded(headers, decode_pair(msg_a, msg_b, self.stereo), keys, infos)
+        return self.answer_decoded(headers, self.decode(msg_a, msg_b, keys), keys, infos)
 
     def answer_decoded(
         self,

@@ -72,6 +72,7 @@ class Loop:
         )
         self.extra_lo = 0  #: local optimisations of models that did not beat their arm's best
         self.hypotheses = 0  #: models scored
+        self.local_optimizing = True  #: False during a probe (:meth:`start`)
 
     def join(self) -> bool:
         """Add the race's next problem as an arm; False when there is none."""
@@ -198,8 +199,13 @@ class Loop:
         if cost[i] < arm.cost:
             arm.model, arm.cost = models[i], float(cost[i])
             arm.raw_count = int(count[i])
-            self.local_optimization(a, models[i], float(cost[i]))
-        elif self.extra_lo < self.max_extra_lo and count[i] >= self.extra_lo_ratio * arm.raw_count:
+            if self.local_optimizing:
+                self.local_optimization(a, models[i], float(cost[i]))
+        elif (
+            self.local_optimizing
+            and self.extra_lo < self.max_extra_lo
+            and count[i] >= self.extra_lo_ratio * arm.raw_count
+        ):
             self.extra_lo += 1
             self.local_optimization(a, models[i], float(cost[i]))
 
@@ -228,17 +234,30 @@ class Loop:
         return cost, count
 
     def start(self, samples: int) -> bool:
-        """The rounds of :meth:`run` until at least ``samples`` samples are drawn in all, the
-        stop or the budget's end (the separable method's probe of the inlier ratio); True when
-        the loop converged. :meth:`run` then goes on as if it had run the rounds itself."""
-        while self.race.active and sum(arm.samples for arm in self.arms) < samples:
-            self.sample_round()
-            if self.converged():
-                return True
-            if self.budget.left() <= 0:
-                return False
-            self.race.step(self.optimize_best, self.join)
-        return self.converged()
+        """The rounds of :meth:`run`, without local optimisation, until at least ``samples``
+        samples are drawn in all, the stop or the budget's end (the separable method's probe of
+        the inlier ratio: minimal-sample models only, so a probe that is dropped costs little);
+        True when the loop converged. :meth:`resume` then lets :meth:`run` go on."""
+        self.local_optimizing = False
+        try:
+            while self.race.active and sum(arm.samples for arm in self.arms) < samples:
+                self.sample_round()
+                if self.converged():
+                    return True
+                if self.budget.left() <= 0:
+                    return False
+                self.race.step(self.optimize_best, self.join)
+            return self.converged()
+        finally:
+            self.local_optimizing = True
+
+    def resume(self) -> None:
+        """After :meth:`start`: local optimisation of each arm's best minimal-sample model (the
+        step the probe left out), so :meth:`run` goes on as if it had drawn the probe's samples
+        itself."""
+        for a, arm in enumerate(self.arms):
+            if arm.model is not None:
+                self.local_optimization(a, arm.model, arm.cost)
 
     def run(self) -> RansacResult:
         """Rounds until the stop, the budget's end or no arm is left; the result."""

@@ -5,7 +5,6 @@ standard RANSAC from the best model so far."""
 
 from __future__ import annotations
 
-import copy
 import time
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -17,7 +16,12 @@ from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.fundamental.task import FundamentalTask
 from sepfm_ros.geometry.robust.loop import RansacResult, run_ransac
 from sepfm_ros.geometry.robust.options import RaceOptions
-from sepfm_ros.geometry.separable.escape import PROBE_SAMPLES, line_search_pays
+from sepfm_ros.geometry.separable.escape import (
+    PROBE_LO_GAIN,
+    PROBE_SAMPLES,
+    copy_generator,
+    line_search_pays,
+)
 from sepfm_ros.geometry.separable.line_pairs import (
     LinePair,
     find_line_pairs,
@@ -171,23 +175,32 @@ def _escape(
     problem: FundamentalTask, line_search_cost: float, est: Estimate
 ) -> RansacResult | None:
     """The paper's escape (``separable.escape``): the first PROBE_SAMPLES samples of the
-    standard loop, drawn from a copy of the task's generator, show the inlier ratio; when the
-    line search cannot pay for itself at that ratio, that loop goes on to its end and its result
-    is returned (``est.line_search_skipped``; with the same seed, standard RANSAC's own answer,
-    the probe being its start). Otherwise None: the task's generator is untouched, the probe's
-    samples and models count in ``est`` (stage 2's) and its time as ``timings_ms["probe"]``."""
+    standard loop, drawn from a copy of the task's generator without local optimisation, show
+    the inlier ratio. When even PROBE_LO_GAIN times it leaves the line search paying for itself,
+    the probe ends there; otherwise its best model is optimised locally once and its inlier
+    ratio decides. When the line search cannot pay, that loop goes on to its end and its result
+    is returned (``est.line_search_skipped``). Otherwise None: the task's generator is
+    untouched, the probe's models count in ``est`` (stage 2's) and its time as
+    ``timings_ms["probe"]``."""
     t = time.perf_counter()
-    rng = copy.deepcopy(problem.rng)
+    rng = copy_generator(problem.rng)
     loop = problem.standard_loop(rng)
     converged = loop.start(PROBE_SAMPLES)
-    ratio = max(loop.best.count, 0) / max(len(problem.data), 1)
-    if not converged and line_search_pays(
-        ratio, problem.model_points, problem.confidence, line_search_cost
-    ):
+    n = max(len(problem.data), 1)
+    k, p = problem.model_points, problem.confidence
+    keep = not converged and line_search_pays(
+        min(1.0, PROBE_LO_GAIN * loop.best.count / n), k, p, line_search_cost
+    )
+    if not keep:
+        loop.resume()  # the probe's best model, optimised locally: its inlier ratio decides
+        keep = not loop.converged() and line_search_pays(
+            loop.best.count / n, k, p, line_search_cost
+        )
+    if keep:
         est.stage2_hypotheses += loop.hypotheses
         est.timings_ms["probe"] = 1e3 * (time.perf_counter() - t)
         return None
-    problem.rng = rng  # what follows (the final model's steps) draws on as after standard()
+    problem.rng = rng  # what follows (the final model's steps) draws on from the loop's stream
     result = loop.run()
     est.line_search_skipped = True
     est.stage2_hypotheses += result.hypotheses

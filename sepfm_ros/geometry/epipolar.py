@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import numba
 import numpy as np
 
@@ -28,6 +30,12 @@ def skew(v: np.ndarray) -> np.ndarray:
 def normalize_fundamental(F: np.ndarray) -> np.ndarray:
     """Scale F (..., 3, 3) to unit Frobenius norm with its largest-magnitude entry positive."""
     F = np.asarray(F, dtype=np.float64)
+    if F.ndim == 2:  # one model: the same arithmetic on Python floats (several times faster)
+        flat1 = F.reshape(9)
+        norm1 = math.sqrt(float(np.add.reduce(flat1 * flat1)))
+        top = float(flat1[int(np.argmax(np.abs(flat1)))])
+        sign1 = -1.0 if top < 0.0 else (1.0 if top >= 0.0 else math.nan)
+        return (flat1 * sign1 / (norm1 if norm1 != 0.0 else 1.0)).reshape(3, 3)
     flat = F.reshape(*F.shape[:-2], 9)
     norm = np.linalg.norm(flat, axis=-1, keepdims=True)
     idx = np.argmax(np.abs(flat), axis=-1)[..., None]

@@ -3,6 +3,9 @@ bail-out, as state shared by the arms of one run."""
 
 from __future__ import annotations
 
+import math
+from functools import lru_cache
+
 import numpy as np
 
 from sepfm_ros.geometry.robust.options import SamplingOptions
@@ -16,11 +19,20 @@ def sprt_threshold(
     """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
     A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
     C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)
-    A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0
+    A0 = float(model_time * C / max(models_per_sample, 1e-9) + 1.0)
     A = A0
     for _ in range(20):
-        A = A0 + np.log(A)
-    return float(A)
+        A = A0 + math.log(A)
+    return A
+
+
+@lru_cache(maxsize=16)
+def reading_order(n: int) -> np.ndarray:
+    """(n,) int64: the SPRT's fixed pseudo-random order of reading n points (its own generator,
+    seeded with n, so the run's draws are untouched). Cached, as every run over n matches reads
+    them in the same order: callers must not write to it (it stays writeable because numba
+    compiles read-only arrays as another type)."""
+    return np.random.default_rng(n).permutation(n).astype(np.int64)
 
 
 class Sprt:
@@ -33,7 +45,7 @@ class Sprt:
         # a fixed pseudo-random reading order: the points come best first, and reading them in
         # that order would bias the SPRT; its own generator leaves the run's draws unchanged, so
         # the bail-out alone reproduces the plain run exactly
-        self.order = np.random.default_rng(n).permutation(n).astype(np.int64)
+        self.order = reading_order(n)
         self.delta = options.sprt_delta
         self.epsilon = 0.0
         self.A = np.inf

@@ -93,13 +93,27 @@ ANCHORS = ["cv-magsac", "cv-accurate"] + (["poselib"] if poselib_available() els
 ANCHORS += superansac_methods()
 
 
-def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, dict]:
-    """Every configuration and anchor on every ``step``-th pair: (pairs, {label: rows})."""
+#: the default method's stages (``Estimate.timings_ms`` keys) in the time breakdown
+STAGES = {
+    "probe": "escape's probe",
+    "lines": "line search",
+    "stage1": "stage 1 (H_e)",
+    "stage2": "stage 2 or standard RANSAC",
+    "refine": "final model and checks",
+}
+
+
+def run_set(
+    manifest: Path, ratio: float, step: int, seed: int
+) -> tuple[int, dict, list[dict[str, float]]]:
+    """Every configuration and anchor on every ``step``-th pair: (pairs, {label: rows}, the
+    default method's ``timings_ms`` per pair)."""
     pairs, _ = load_manifest(manifest)
     pairs = pairs[::step]
     cache = MatchesCache(REPO / ".cache" / "matches", MatchSettings("sift", ratio))
     labels = [*CONFIGS, *ANCHORS]
     rows: dict[str, list[tuple[float, ...]]] = {k: [] for k in labels}
+    stages: list[dict[str, float]] = []
     t0 = time.time()
     for i, pair in enumerate(pairs):
         m = cache.matches(pair)
@@ -119,6 +133,8 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
                 ran = float("lines" in e.timings_ms) if separable else np.nan
                 used = float(e.line_pair is not None) if separable else np.nan
                 loop_ms = e.timings_ms.get("stage2", np.nan) / max(e.hypotheses, 1)
+                if label == "default":
+                    stages.append({**e.timings_ms, "measured": ms})
             else:
                 r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
                 F, ms, lines_ms = r.F, r.ms, np.nan
@@ -130,7 +146,25 @@ def run_set(manifest: Path, ratio: float, step: int, seed: int) -> tuple[int, di
         sys.stderr.write(f"\r  {manifest.parent.name}: {i + 1}/{len(pairs)} pairs, "
                          f"{time.time() - t0:.0f} s")  # fmt: skip
     sys.stderr.write("\n")
-    return len(pairs), rows
+    return len(pairs), rows, stages
+
+
+def stage_table(rows: dict, stages: list[dict[str, float]]) -> str:
+    """Where the default method's time goes: mean ms per pair of each stage (0 where a pair
+    skipped it; the means add up to the mean total), against USAC_MAGSAC's mean and median."""
+    mean = {k: float(np.mean([t.get(k, 0.0) for t in stages])) for k in STAGES}
+    total = float(np.mean([t["measured"] for t in stages]))
+    other = total - sum(mean.values())
+    magsac = np.array([r[3] for r in rows["cv-magsac"]], dtype=float)
+    head = " | ".join(STAGES.values())
+    cells = " | ".join(f"{v:.2f}" for v in mean.values())
+    return (
+        f"Where {DEFAULT_METHOD}'s time goes (mean ms per pair; a stage a pair skipped counts "
+        f"0; other: set-up and input checks):\n\n"
+        f"| {head} | other | total | USAC_MAGSAC (mean; median) |\n"
+        f"|{'---|' * (len(STAGES) + 3)}\n"
+        f"| {cells} | {other:.2f} | {total:.2f} | {magsac.mean():.2f}; {np.median(magsac):.2f} |"
+    )
 
 
 def table(rows: dict) -> str:
@@ -198,10 +232,10 @@ def main(argv: list[str] | None = None) -> int:
     parts = []
     for s in names:
         manifest, ratio = SETS[s]
-        n, rows = run_set(manifest, ratio, a.step, a.seed)
+        n, rows, stages = run_set(manifest, ratio, a.step, a.seed)
         head = (f"**{manifest.parent.name}, SIFT ratio {ratio}, threshold 1 px** "
                 f"({n} pairs: every {a.step}th of {manifest.name}; seed {a.seed})")  # fmt: skip
-        parts.append(f"{head}\n\n{table(rows)}")
+        parts.append(f"{head}\n\n{table(rows)}\n\n{stage_table(rows, stages)}")
         print(parts[-1] + "\n", flush=True)
     body = "\n\n".join(parts)
     title = f"Ablation of the default method ({DEFAULT_METHOD}), same run, same matches"

@@ -27,7 +27,7 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
     assert set(superansac_methods()) <= set(bench_ablation.ANCHORS)  # where installed
     for label in labels:
         row = re.search(rf"^\| {re.escape(label)} \| (\S+) \| (\S+) \| (\S+) \| (\S+) \| (\S+) "
-                        r"\| ([^|]+) \|$", out, re.M)  # fmt: skip
+                        r"\| ([^|]+) \| ([^|]+) \|$", out, re.M)  # fmt: skip
         assert row, label
         f, success = float(row.group(1)), float(row.group(2))
         assert 0.0 <= f <= 1.0 and 0.0 <= success <= 100.0
@@ -35,9 +35,22 @@ def test_two_pairs_every_configuration_printed_and_written(shared_data, tmp_path
         if label.startswith("superansac"):  # its returned iterations
             assert int(row.group(3)) > 0
         lines = re.fullmatch(r"(\d+\.\d\d) \((\d+)%\)", row.group(6))
-        if label.startswith(DEFAULT_METHOD):  # the line search's cost per pair and its share
+        share = re.fullmatch(r"(\d+) \((\d+)\)", row.group(7))
+        if label == "escape off (line search on every pair)":
             assert lines and float(lines.group(1)) > 0 and 0 < int(lines.group(2)) <= 100, row[0]
-    assert re.search(r"^\| cv-magsac \| .* \| 1\.00 \| n/a \|$", out, re.M)
+            assert share and int(share.group(1)) == 100, row[0]  # every pair ran it
+        if label.startswith(DEFAULT_METHOD):  # pairs that ran the line search, and used a pair
+            assert share and 0 <= int(share.group(2)) <= int(share.group(1)) <= 100, row[0]
+        if label in bench_ablation.ANCHORS:
+            assert row.group(6) == row.group(7) == "n/a"
+    assert re.search(r"^\| cv-magsac \| .* \| 1\.00 \| n/a \| n/a \|$", out, re.M)
+    # where the default method's time goes: stage means that add up to the total
+    stages = re.search(r"^\| ((?:\d+\.\d\d \| ){6})(\d+\.\d\d) \| (\d+\.\d\d); (\d+\.\d\d) \|$",
+                       out, re.M)  # fmt: skip
+    assert stages, out
+    parts = [float(v) for v in stages.group(1).split(" | ") if v]
+    assert all(v >= 0 for v in parts[:5]) and float(stages.group(2)) > 0
+    assert abs(sum(parts) - float(stages.group(2))) <= 0.035  # 7 figures rounded to 0.005
     body = bench_docs.read_block(doc.read_text(), "bench_ablation")
     assert body.startswith(f"## Ablation of the default method ({DEFAULT_METHOD})")
     assert "Not generated yet" in bench_docs.read_block(doc.read_text(), "bench_estimators")

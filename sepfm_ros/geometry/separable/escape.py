@@ -23,6 +23,7 @@ from typing import NamedTuple
 import numpy as np
 
 from sepfm_ros.geometry.robust.trials import trial_count
+from sepfm_ros.geometry.separable.options import LINE_SEARCH_HYPOTHESES
 
 __all__ = [
     "LINE_SEARCH_HYPOTHESES",
@@ -44,15 +45,6 @@ PROBE_SAMPLES = 8
 #: A probe below the break-even ratio by more than this keeps the line search without it; a
 #: larger gain on a rare pair costs only the time the escape would have saved.
 PROBE_LO_GAIN = 3.0
-#: The line search's cost in F hypotheses (one seven-point model solved and scored on all
-#: matches, with the loop's share of local optimisation): its median ms per pair over
-#: ransac7's median ms per hypothesis of its loop (``timings_ms["stage2"]`` / hypotheses), both
-#: from ``benchmarks/bench_ablation.py`` ("line search in hypothesis-equivalents"): 1.13 ms over
-#: 47 us = 24 on the shared pairs (SIFT 0.95), whose clean pairs sit near the break-even ratio
-#: where the figure matters; 158 on the line-rich pairs, whose hard pairs' hypotheses are
-#: mostly cut short by the SPRT (10 us each) and whose inlier ratios are far below the
-#: break-even (at w = 0.5 the line search pays up to 739).
-LINE_SEARCH_HYPOTHESES = 24.0
 #: Models per seven-point (or stage-2) sample: the real roots of the cubic, about 1.5 on the
 #: shared pairs (ransac7's models per sample, local optimisation left out); stage 1's 3-point
 #: samples give one H_e each.

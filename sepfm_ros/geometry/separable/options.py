@@ -13,7 +13,17 @@ from sepfm_ros.geometry.fundamental.options import (
     require_positive,
 )
 from sepfm_ros.geometry.robust.options import PoolRule
-from sepfm_ros.geometry.separable.escape import LINE_SEARCH_HYPOTHESES
+
+#: The line search's cost in F hypotheses (one seven-point model solved and scored on all
+#: matches, with the loop's share of local optimisation): its median ms per pair over
+#: ransac7's median ms per hypothesis of its loop (``timings_ms["stage2"]`` / hypotheses), both
+#: from ``benchmarks/bench_ablation.py`` ("line search in hypothesis-equivalents"): 1.13 ms over
+#: 47 us = 24 on the shared pairs (SIFT 0.95), whose clean pairs sit near the break-even ratio
+#: where the figure matters; 158 on the line-rich pairs, whose hard pairs' hypotheses are
+#: mostly cut short by the SPRT (10 us each) and whose inlier ratios are far below the
+#: break-even (at w = 0.5 the line search pays up to 739). Defined here, where the escape
+#: (``separable.escape``) reads it, so that the node's parameter table imports no numba.
+LINE_SEARCH_HYPOTHESES = 24.0
 
 
 @dataclass(frozen=True)
@@ -84,7 +94,7 @@ class Lines:
             probe and the line search is skipped (``Estimate.line_search_skipped``). Not
             applied to the LMedS methods.
         line_search_cost: the line search's cost in F hypotheses that the escape weighs
-            (default ``separable.escape.LINE_SEARCH_HYPOTHESES``, measured by
+            (default :data:`LINE_SEARCH_HYPOTHESES`, measured by
             ``benchmarks/bench_ablation.py``).
     """
 

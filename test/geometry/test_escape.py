@@ -69,14 +69,29 @@ def test_bad_arguments_raise(bad):
         escape_costs(bad[0], bad[1], 0.99)
 
 
-def test_copy_generator_draws_the_same_and_leaves_the_original():
+def test_copy_generator_draws_and_spawns_the_same_and_leaves_the_original():
     rng = np.random.default_rng(7)
     rng.integers(0, 10, 3)
+    rng.spawn(2)
     copy = copy_generator(rng)
     assert np.array_equal(copy.integers(0, 2**31, 5), rng.integers(0, 2**31, 5))
-    copy.random(10)  # the copy's draws do not advance the original
+    # its children are the original's (the final model's steps draw on spawned streams)
+    assert np.array_equal(copy.spawn(1)[0].random(3), rng.spawn(1)[0].random(3))
+    copy.random(10)  # the copy's draws and spawns do not advance the original
+    copy.spawn(3)
     again = copy_generator(rng)
     assert np.array_equal(again.random(4), rng.random(4))
+    assert np.array_equal(again.spawn(1)[0].random(3), rng.spawn(1)[0].random(3))
+
+
+def test_an_escaped_estimate_is_deterministic():
+    """Same seed, same answer, to the bit: the inner sampling and the significance test draw on
+    streams spawned from the escape's copy of the generator."""
+    sp = _pair(200, 8, 1)
+    a, b = (estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, seed=5) for _ in range(2))
+    assert a.line_search_skipped and b.line_search_skipped
+    np.testing.assert_array_equal(a.F, b.F)
+    assert a.log10_nfa == b.log10_nfa and a.hypotheses == b.hypotheses
 
 
 def _pair(n_inliers: int, n_outliers: int, seed: int):

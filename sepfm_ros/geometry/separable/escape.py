@@ -17,6 +17,7 @@ it is wasted: the probe is that loop's start).
 
 from __future__ import annotations
 
+import copy
 import math
 from typing import NamedTuple
 
@@ -110,8 +111,16 @@ def line_search_pays(
 
 
 def copy_generator(rng: np.random.Generator) -> np.random.Generator:
-    """An independent generator in ``rng``'s state (same bit generator type): it draws what
-    ``rng`` would draw next, and leaves ``rng`` as it was."""
-    bit = type(rng.bit_generator)()
+    """An independent generator in ``rng``'s state: it draws what ``rng`` would draw next, and
+    its ``spawn`` gives the children ``rng``'s would (a copy of the seed sequence, so spawning
+    from one does not advance the other); ``rng`` is left as it was."""
+    seq = rng.bit_generator.seed_seq
+    if not isinstance(seq, np.random.SeedSequence):  # e.g. a generator made from a state
+        return copy.deepcopy(rng)
+    seq = np.random.SeedSequence(
+        seq.entropy, spawn_key=seq.spawn_key, pool_size=seq.pool_size,
+        n_children_spawned=seq.n_children_spawned,
+    )  # fmt: skip
+    bit = type(rng.bit_generator)(seq)
     bit.state = rng.bit_generator.state
     return np.random.Generator(bit)

@@ -160,20 +160,86 @@ def msac_cost(
     return c, k
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def point_costs(
+    f: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    lo: int,
+    hi: int,
+    threshold: float,
+    e: np.ndarray,
+    inlier: np.ndarray,
+) -> int:
+    """MSAC terms of points lo .. hi - 1 under one model f (3, 3): e[i] = min(d^2, t^2) (d < t:
+    d^2, else t^2), inlier[i] = d < t, for the pixel points (x[i], y[i]) <-> (u[i], v[i]) ((N,)
+    rows); returns how many are inliers.
+
+    Branch-free (numpy's error model: a zero line normal gives inf, not an exception), so the
+    compiler vectorises it; d is :func:`_distance_one`'s arithmetic, so every term and every
+    ``d < t`` is the same to the bit (the cheap test of :func:`_distance_within` only ever turns
+    a distance above the threshold into inf)."""
+    f00, f01, f02 = f[0, 0], f[0, 1], f[0, 2]
+    f10, f11, f12 = f[1, 0], f[1, 1], f[1, 2]
+    f20, f21, f22 = f[2, 0], f[2, 1], f[2, 2]
+    t2 = threshold * threshold
+    k = 0
+    for i in range(lo, hi):
+        xi, yi, ui, vi = x[i], y[i], u[i], v[i]
+        a2 = f00 * xi + f01 * yi + f02
+        b2 = f10 * xi + f11 * yi + f12
+        c2 = f20 * xi + f21 * yi + f22
+        a1 = f00 * ui + f10 * vi + f20
+        b1 = f01 * ui + f11 * vi + f21
+        n2 = a2 * a2 + b2 * b2
+        n1 = a1 * a1 + b1 * b1
+        r = a2 * ui + b2 * vi + c2
+        d = 0.5 * abs(r) * (1.0 / np.sqrt(n2) + 1.0 / np.sqrt(n1))
+        ok = d < threshold
+        e[i] = d * d if ok else t2
+        inlier[i] = ok
+        k += ok
+    return k
+
+
 @numba.njit(cache=True, nogil=True)
 def msac_kernel(
     F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
 ) -> tuple[np.ndarray, np.ndarray]:
     """MSAC score of (M, 3, 3) models on (>=2, N) pixel points without an (M, N) temporary.
 
-    Returns (cost (M,), sum of min(d^2, t^2); inlier count (M,), d < t), d in px.
+    Returns (cost (M,), sum of min(d^2, t^2) in index order; inlier count (M,), d < t), d in px:
+    :func:`msac_cost`'s values to the bit, from the vectorised :func:`point_costs`.
     """
-    M = F.shape[0]
+    M, N = F.shape[0], X1.shape[1]
     cost = np.empty(M)
     count = np.zeros(M, dtype=np.int64)
+    e = np.empty(N)
+    inlier = np.empty(N, dtype=np.bool_)
+    x, y, u, v = X1[0], X1[1], X2[0], X2[1]
     for m in range(M):
-        cost[m], count[m] = msac_cost(F[m], X1, X2, threshold, np.inf)
+        count[m] = point_costs(F[m], x, y, u, v, 0, N, threshold, e, inlier)
+        c = 0.0
+        for i in range(N):
+            c += e[i]
+        cost[m] = c
     return cost, count
+
+
+def reading_copy(X1: np.ndarray, X2: np.ndarray, order: np.ndarray) -> np.ndarray:
+    """(4, N) C-contiguous rows x, y, u, v of the pixel points (X1, X2 (>=2, N)) in ``order``:
+    what :func:`sprt_msac_kernel` reads (made once per data and order, not per call)."""
+    out = np.empty((4, X1.shape[1]))
+    out[0], out[1] = X1[0, order], X1[1, order]
+    out[2], out[3] = X2[0, order], X2[1, order]
+    return out
+
+
+#: points :func:`sprt_msac_kernel` reads one at a time before it scores the rest a chunk at a
+#: time (most models of a bad sample are rejected within the first few points), and the chunk
+_SINGLY, _CHUNK = 32, 128
 
 
 @numba.njit(cache=True, nogil=True)
@@ -183,6 +249,7 @@ def sprt_msac_kernel(
     X2: np.ndarray,
     threshold: float,
     order: np.ndarray,
+    ordered: np.ndarray,
     log_A: float,
     log_in: float,
     log_out: float,
@@ -191,15 +258,20 @@ def sprt_msac_kernel(
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """MSAC score of (M, 3, 3) models with early rejection (SPRT and a bail-out).
 
-    Points are read in ``order`` (a permutation of range(N)). SPRT (Matas & Chum): the log
-    likelihood ratio grows by ``log_in`` = log(delta / epsilon) per inlier and ``log_out`` =
-    log((1 - delta) / (1 - epsilon)) per outlier; the model is rejected as soon as it exceeds
-    ``log_A`` (pass inf to disable). Bail-out: rejected as soon as its partial cost reaches
-    ``bail_cost`` while even all unread points being inliers would keep its count below
-    ``bail_count`` (pass inf / 0 to disable), and its partial cost exceeds the full cost of an
-    earlier model of this call; such a model can neither beat ``bail_cost``, nor reach
-    ``bail_count``, nor be this call's cheapest model, so the bail-out never changes what a
-    caller deciding by those bounds and by the cheapest model decides.
+    Points are read in ``order`` (a permutation of range(N)); ``ordered`` (4, N) holds them in
+    that order (:func:`reading_copy`). SPRT (Matas & Chum): the log likelihood ratio grows by
+    ``log_in`` = log(delta / epsilon) per inlier and ``log_out`` = log((1 - delta) / (1 -
+    epsilon)) per outlier; the model is rejected as soon as it exceeds ``log_A`` (pass inf to
+    disable). Bail-out: rejected as soon as its partial cost reaches ``bail_cost`` while even
+    all unread points being inliers would keep its count below ``bail_count`` (pass inf / 0 to
+    disable), and its partial cost exceeds the full cost of an earlier model of this call; such
+    a model can neither beat ``bail_cost``, nor reach ``bail_count``, nor be this call's
+    cheapest model, so the bail-out never changes what a caller deciding by those bounds and by
+    the cheapest model decides.
+
+    The first ``_SINGLY`` points are read one at a time, the rest computed a chunk at a time
+    (:func:`point_costs`, vectorised) and checked one by one: a model is rejected at the same
+    point either way.
 
     Returns (cost (M,), inf when rejected, else exactly :func:`msac_kernel`'s cost (summed in
     index order); inlier count (M,), of the points read when rejected; points read (M,);
@@ -212,35 +284,57 @@ def sprt_msac_kernel(
     count = np.zeros(M, dtype=np.int64)
     read = np.zeros(M, dtype=np.int64)
     rejected = np.zeros(M, dtype=np.bool_)
-    per_point = np.empty(N)
+    per_point = np.empty(N)  # terms in index order, for the sum
+    e = np.empty(N)  # terms and inlier flags in reading order
+    inlier = np.empty(N, dtype=np.bool_)
+    x, y, u, v = X1[0], X1[1], X2[0], X2[1]
+    xo, yo, uo, vo = ordered[0], ordered[1], ordered[2], ordered[3]
+    early = log_A < np.inf or bail_cost < np.inf
     batch_best = np.inf  # cheapest full cost of this call so far
     for m in range(M):
         f = F[m]
+        if not early:  # nothing can stop a model: every point, in index order
+            count[m] = point_costs(f, x, y, u, v, 0, N, threshold, e, inlier)
+            read[m] = N
+            c = 0.0
+            for i in range(N):
+                c += e[i]
+            cost[m] = c
+            batch_best = min(batch_best, c)
+            continue
         c = 0.0
         k = 0
         llr = 0.0
         stop = False
         j = 0
-        while j < N:
-            i = order[j]
-            d = _distance_within(f, X1[0, i], X1[1, i], X2[0, i], X2[1, i], cap2)
-            j += 1
-            if d < threshold:
-                e = d * d
-                k += 1
-                llr += log_in
-            else:
-                e = t2
-                llr += log_out
-            per_point[i] = e
-            c += e
-            if llr > log_A:
-                rejected[m] = True
-                stop = True
-                break
-            if c >= bail_cost and c > batch_best and k + (N - j) < bail_count:
-                stop = True
-                break
+        lo = 0
+        while lo < N and not stop:
+            if lo < _SINGLY:  # one point (the cheap test decides most of a bad model's)
+                hi = lo + 1
+                d = _distance_within(f, xo[lo], yo[lo], uo[lo], vo[lo], cap2)
+                inlier[lo] = d < threshold
+                e[lo] = d * d if inlier[lo] else t2
+            else:  # a chunk of vectorised terms
+                hi = min(N, lo + _CHUNK)
+                point_costs(f, xo, yo, uo, vo, lo, hi, threshold, e, inlier)
+            for jj in range(lo, hi):
+                j = jj + 1
+                ej = e[jj]
+                per_point[order[jj]] = ej
+                if inlier[jj]:
+                    k += 1
+                    llr += log_in
+                else:
+                    llr += log_out
+                c += ej
+                if llr > log_A:
+                    rejected[m] = True
+                    stop = True
+                    break
+                if c >= bail_cost and c > batch_best and k + (N - j) < bail_count:
+                    stop = True
+                    break
+            lo = hi
         read[m] = j
         count[m] = k
         if stop:

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from sepfm_ros.geometry import estimate_fundamental
-from sepfm_ros.geometry.epipolar import msac_kernel, sprt_msac_kernel, symmetric_epipolar_distance
+from sepfm_ros.geometry.epipolar import (
+    distances_kernel,
+    msac_cost,
+    msac_kernel,
+    reading_copy,
+    sprt_msac_kernel,
+    symmetric_epipolar_distance,
+)
 from sepfm_ros.geometry.robust.samplers import ProsacSampler, prosac_schedule
 from sepfm_ros.geometry.robust.sprt import sprt_threshold
 from sepfm_ros.geometry.synthetic import make_pair
@@ -73,7 +80,7 @@ def test_sprt_rejects_a_bad_model_after_few_points():
     bad /= np.linalg.norm(bad.reshape(20, -1), axis=1)[:, None, None]
     order = rng.permutation(len(sp.pts1)).astype(np.int64)
     cost, count, read, rejected = sprt_msac_kernel(
-        bad, X1, X2, 1.0, order, *_sprt_args(0.6), np.inf, 0
+        bad, X1, X2, 1.0, order, reading_copy(X1, X2, order), *_sprt_args(0.6), np.inf, 0
     )
     assert rejected.all() and np.all(np.isinf(cost))
     assert np.median(read) < 30 and read.max() < 0.25 * len(sp.pts1)
@@ -87,11 +94,68 @@ def test_sprt_keeps_the_true_model_and_its_exact_cost():
         eps = np.mean(symmetric_epipolar_distance(sp.F, sp.pts1, sp.pts2) < 1.0)
         order = np.random.default_rng(seed).permutation(len(sp.pts1)).astype(np.int64)
         cost, count, read, rejected = sprt_msac_kernel(
-            F, X1, X2, 1.0, order, *_sprt_args(eps), np.inf, 0
+            F, X1, X2, 1.0, order, reading_copy(X1, X2, order), *_sprt_args(eps), np.inf, 0
         )
         ref_cost, ref_count = msac_kernel(F, X1, X2, 1.0)
         assert not rejected[0] and read[0] == len(sp.pts1), seed
         assert cost[0] == ref_cost[0] and count[0] == ref_count[0]  # bit-identical
+
+
+def _sprt_reference(F, X1, X2, t, order, log_A, log_in, log_out, bail_cost, bail_count):
+    """The SPRT / bail-out scoring one point at a time, from the scalar distance kernel."""
+    d_all = distances_kernel(F, X1, X2)
+    N = X1.shape[1]
+    out = []
+    best = np.inf
+    for m in range(len(F)):
+        c, k, llr, j, stop, sprt = 0.0, 0, 0.0, 0, False, False
+        while j < N:
+            d = d_all[m, order[j]]
+            j += 1
+            inl = d < t
+            k += int(inl)
+            llr += log_in if inl else log_out
+            c += d * d if inl else t * t
+            if llr > log_A:
+                stop = sprt = True
+                break
+            if c >= bail_cost and c > best and k + (N - j) < bail_count:
+                stop = True
+                break
+        cost = np.inf if stop else msac_cost(F[m], X1, X2, t, np.inf)[0]
+        if not stop:
+            best = min(best, cost)
+        out.append((cost, k, j, sprt))
+    return out
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_vectorised_scoring_equals_reading_points_one_by_one(seed):
+    """The chunked, vectorised kernels give the costs, counts, points read and rejections of
+    scoring one point at a time, to the bit, with the SPRT, the bail-out, both and neither."""
+    rng = np.random.default_rng(seed)
+    sp = make_pair(n_inliers=150 + 40 * seed, n_outliers=120, noise=0.6, seed=seed)
+    X1, X2 = _homog(sp.pts1), _homog(sp.pts2)
+    scales = np.logspace(-7, -4, 6)[:, None, None]
+    near = sp.F + scales * rng.normal(size=(6, 3, 3)) * np.abs(sp.F).max()
+    far = rng.normal(size=(4, 3, 3))
+    F = np.ascontiguousarray(np.concatenate([sp.F[None], near, far, np.zeros((1, 3, 3))]))
+    t = 1.0 + 0.3 * seed
+    ref_cost = np.array([msac_cost(f, X1, X2, t, np.inf)[0] for f in F])
+    cost, count = msac_kernel(F, X1, X2, t)
+    assert np.array_equal(cost, ref_cost)
+    assert np.array_equal(count, (distances_kernel(F, X1, X2) < t).sum(axis=1))
+    order = rng.permutation(X1.shape[1]).astype(np.int64)
+    eps = float(np.mean(symmetric_epipolar_distance(sp.F, sp.pts1, sp.pts2) < t))
+    finite = np.sort(ref_cost)
+    for sprt in (_sprt_args(eps), (np.inf, 0.0, 0.0)):
+        for bail in ((np.inf, 0), (float(finite[1]), int(count.max()))):
+            got = sprt_msac_kernel(F, X1, X2, t, order, reading_copy(X1, X2, order), *sprt, *bail)
+            want = _sprt_reference(F, X1, X2, t, order, *sprt, *bail)
+            assert np.array_equal(got[0], [w[0] for w in want])
+            assert got[1].tolist() == [w[1] for w in want]
+            assert got[2].tolist() == [w[2] for w in want]
+            assert got[3].tolist() == [w[3] for w in want]
 
 
 def test_bailout_stops_only_models_that_cannot_matter():
@@ -101,7 +165,9 @@ def test_bailout_stops_only_models_that_cannot_matter():
     ref_cost, _ = msac_kernel(F, X1, X2, 1.0)
     order = np.arange(len(sp.pts1), dtype=np.int64)
     bail = 0.5 * (ref_cost[0] + ref_cost[1])
-    cost, _, read, rejected = sprt_msac_kernel(F, X1, X2, 1.0, order, np.inf, 0, 0, bail, 10**6)
+    cost, _, read, rejected = sprt_msac_kernel(
+        F, X1, X2, 1.0, order, reading_copy(X1, X2, order), np.inf, 0, 0, bail, 10**6
+    )
     assert cost[0] == ref_cost[0] and np.isinf(cost[1]) and not rejected.any()
     assert read[1] < len(sp.pts1)
 

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from sepfm_ros.geometry.epipolar import (
     hartley_kernel,
     homogeneous_columns,
+    reading_copy,
     symmetric_epipolar_distance_h,
 )
 
@@ -26,6 +27,8 @@ class Correspondences:
     T2: np.ndarray
     X1: np.ndarray
     X2: np.ndarray
+    #: (order, its :func:`~sepfm_ros.geometry.epipolar.reading_copy`) of :meth:`in_order`
+    _in_order: tuple[np.ndarray, np.ndarray] | None = field(default=None, repr=False, compare=False)
 
     @classmethod
     def from_pixels(cls, pts1: np.ndarray, pts2: np.ndarray) -> Correspondences:
@@ -49,6 +52,15 @@ class Correspondences:
             self.pts1[idx], self.pts2[idx], self.x1[idx], self.x2[idx], self.T1, self.T2,
             np.ascontiguousarray(self.X1[:, idx]), np.ascontiguousarray(self.X2[:, idx]),
         )  # fmt: skip
+
+    def in_order(self, order: np.ndarray) -> np.ndarray:
+        """(4, N) the pixel points (x1, y1, x2, y2 rows) read in ``order`` (N,), the SPRT's
+        reading order; made once for the last order asked (every arm of an estimate reads the
+        same)."""
+        cached = self._in_order
+        if cached is None or cached[0] is not order:
+            cached = self._in_order = (order, reading_copy(self.X1, self.X2, order))
+        return cached[1]
 
     def distances(self, F: np.ndarray) -> np.ndarray:
         """Symmetric epipolar distances (px) of (3, 3) -> (N,) or (M, 3, 3) -> (M, N) models."""

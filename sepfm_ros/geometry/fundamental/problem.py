@@ -246,8 +246,8 @@ class FundamentalProblem(Problem):
             M = len(models)
             return cost, count, np.full(M, self.n, dtype=np.int64), np.zeros(M, dtype=bool)
         return sprt_msac_kernel(
-            models, self.data.X1, self.data.X2, self.threshold, order, log_A, log_in, log_out,
-            bail_cost, bail_count,
+            models, self.data.X1, self.data.X2, self.threshold, order, self.data.in_order(order),
+            log_A, log_in, log_out, bail_cost, bail_count,
         )  # fmt: skip
 
     def local_optimize(self, model: np.ndarray) -> np.ndarray:

@@ -33,18 +33,14 @@ Figures are measured on this machine in this run; nothing is asserted.
 from __future__ import annotations
 
 import argparse
-import cProfile
-import pstats
 import sys
 import time
-from collections.abc import Callable
 from functools import partial
 from pathlib import Path
 
 import bench_docs
-import cv2
 import numpy as np
-from numba.core.dispatcher import Dispatcher
+from compiled_work import compiled_note, compiled_share
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
@@ -117,42 +113,6 @@ STAGES = {
 }
 
 
-def compiled_functions() -> set[tuple[str, str]]:
-    """(file, name) of every numba-compiled function of sepfm_ros: what cProfile records a call
-    of a compiled kernel from Python under (kernels that call each other are one entry)."""
-    keys = set()
-    for name, module in list(sys.modules.items()):
-        if name.startswith("sepfm_ros"):
-            for value in vars(module).values():
-                if isinstance(value, Dispatcher):
-                    code = value.py_func.__code__
-                    keys.add((code.co_filename, code.co_name))
-    return keys
-
-
-#: how cProfile names OpenCV's functions
-CV2_FUNCTIONS = {f"<{name}>" for name in dir(cv2)}
-
-
-def compiled_share(run: Callable[[], object]) -> float:
-    """Share of ``run()``'s time, under cProfile, spent inside compiled code: sepfm_ros's numba
-    kernels and OpenCV's functions (the rest is Python and numpy's Python-level calls). The
-    profiler slows Python calls far more than a compiled call, so the share is a lower bound of
-    the unprofiled one."""
-    profile = cProfile.Profile()
-    profile.enable()
-    run()
-    profile.disable()
-    stats = pstats.Stats(profile).stats  # type: ignore[attr-defined]
-    kernels = compiled_functions()
-    total = compiled = 0.0
-    for (path, _, name), row in stats.items():
-        total += row[2]  # time inside the function itself
-        if (path, name) in kernels or (path == "~" and name in CV2_FUNCTIONS):
-            compiled += row[2]
-    return compiled / total if total > 0 else float("nan")
-
-
 def run_set(
     manifest: Path, ratio: float, step: int, seed: int
 ) -> tuple[int, dict, list[dict[str, float]]]:
@@ -213,28 +173,17 @@ def stage_table(rows: dict, stages: list[dict[str, float]], required: float) -> 
     magsac = np.array([r[3] for r in rows["cv-magsac"]], dtype=float)
     head = " | ".join(STAGES.values())
     cells = " | ".join(f"{v:.2f}" for v in mean.values())
+    note = compiled_note(
+        [t["compiled"] for t in stages], [t["measured"] for t in stages],
+        float(np.median(magsac)), required,
+    )  # fmt: skip
     return (
         f"Where {DEFAULT_METHOD}'s time goes (mean ms per pair; a stage a pair skipped counts "
         f"0; other: set-up and input checks):\n\n"
         f"| {head} | other | total | USAC_MAGSAC (mean; median) |\n"
         f"|{'---|' * (len(STAGES) + 3)}\n"
         f"| {cells} | {other:.2f} | {total:.2f} | {magsac.mean():.2f}; {np.median(magsac):.2f} |"
-        f"\n\n{compiled_note(stages, float(np.median(magsac)), required)}"
-    )
-
-
-def compiled_note(stages: list[dict[str, float]], magsac_ms: float, required: float) -> str:
-    """The compiled work of the default method (numba kernels and OpenCV: each pair's
-    :func:`compiled_share` of its measured ms) against the required ratio to USAC_MAGSAC."""
-    compiled = float(np.median([t["compiled"] for t in stages]))
-    measured = float(np.median([t["measured"] for t in stages]))
-    verdict = "above" if compiled > required * magsac_ms else "within"
-    return (
-        f"Compiled work (numba kernels and OpenCV, each pair's share of a profiled run times its "
-        f"measured ms): median {compiled:.2f} ms per pair, {compiled / magsac_ms:.2f}x "
-        f"USAC_MAGSAC's median; the method's median {measured:.2f} ms is "
-        f"{measured / magsac_ms:.2f}x. Required: at most {required:.2f}x "
-        f"({required * magsac_ms:.2f} ms); the compiled work alone is {verdict} it."
+        f"\n\n{note}"
     )
 
 

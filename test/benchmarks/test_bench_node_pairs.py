@@ -71,6 +71,18 @@ def test_two_pairs_per_sequence_print_and_write_docs(shared_data, tmp_path, caps
         assert (hyp == "n/a") == (name == "cv-magsac")
         if name == "cv-magsac":
             assert ratio == "1.00"
+    # per sequence, the default method's compiled work against its required ratio
+    notes = re.findall(
+        r"^Compiled work .*: median (\d+\.\d\d) ms per pair, \S+x USAC_MAGSAC's median; the "
+        r"method's median (\d+\.\d\d) ms is \S+x\. Required: at most (1\.95|1\.50)x "
+        r"\((\d+\.\d\d) ms\); the compiled work alone is (above|within) it\.$",
+        out,
+        re.M,
+    )
+    assert [n[2] for n in notes] == ["1.95", "1.50"]  # KITTI, then templeRing
+    for compiled, measured, _, allowed, verdict in notes:
+        assert 0 < float(compiled) <= float(measured)
+        assert verdict == ("above" if float(compiled) > float(allowed) else "within")
     body = bench_docs.read_block(doc.read_text(), "bench_node_pairs")
     assert body.startswith("## Node pipeline on consecutive frames")
     assert "`python benchmarks/bench_node_pairs.py --data" in body

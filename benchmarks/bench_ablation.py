@@ -21,7 +21,9 @@ whose line search the escape kept and of pairs answered from a line pair, and pe
 search's cost in hypotheses of ransac7's loop (what ``separable.escape`` weighs). Then where the
 default method's time goes by stage, and its compiled work (numba kernels and OpenCV, measured
 with cProfile) against the most time over USAC_MAGSAC's that ``REQUIRED_RATIO`` allows: a
-compiled share above it cannot be met by compiling the Python that remains.
+compiled share above it cannot be met by compiling the Python that remains. Each configuration's
+timed run on a pair follows an untimed run of it on the same matches (``compiled_work.warm_up``),
+so none is timed right after another library's runs.
 
     python benchmarks/bench_ablation.py [--sets lines,shared] [--step 4] [--seed 0]
         [--write-docs]
@@ -40,7 +42,7 @@ from pathlib import Path
 
 import bench_docs
 import numpy as np
-from compiled_work import compiled_note, compiled_share
+from compiled_work import compiled_note, compiled_share, warm_up
 
 from sepfm_ros.evaluation.manifest import load_manifest
 from sepfm_ros.evaluation.matches_cache import MatchesCache, MatchSettings
@@ -131,11 +133,14 @@ def run_set(
         for label in labels:
             if label in CONFIGS:
                 method, options = CONFIGS[label]
-                t = time.perf_counter()
-                e = estimate_fundamental(
-                    m.pts_a, m.pts_b, m.size_a, m.size_b, method=method or DEFAULT_METHOD,
-                    threshold=1.0, confidence=0.99, seed=seed, **options,
+                run = partial(
+                    estimate_fundamental, m.pts_a, m.pts_b, m.size_a, m.size_b,
+                    method=method or DEFAULT_METHOD, threshold=1.0, confidence=0.99, seed=seed,
+                    **options,
                 )  # fmt: skip
+                warm_up(run)
+                t = time.perf_counter()
+                e = run()
                 ms = 1e3 * (time.perf_counter() - t)
                 F, hyp = e.F, float(e.hypotheses)
                 lines_ms = float(e.timings_ms.get("lines", np.nan))
@@ -144,12 +149,10 @@ def run_set(
                 used = float(e.line_pair is not None) if separable else np.nan
                 loop_ms = e.timings_ms.get("stage2", np.nan) / max(e.hypotheses, 1)
                 if label == "default":
-                    share = compiled_share(partial(
-                        estimate_fundamental, m.pts_a, m.pts_b, m.size_a, m.size_b,
-                        method=DEFAULT_METHOD, threshold=1.0, confidence=0.99, seed=seed,
-                    ))  # fmt: skip
+                    share = compiled_share(run)
                     stages.append({**e.timings_ms, "measured": ms, "compiled": share * ms})
             else:
+                warm_up(REGISTRY[label].run, m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
                 r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
                 F, ms, lines_ms = r.F, r.ms, np.nan
                 hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan

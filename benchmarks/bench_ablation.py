@@ -152,8 +152,11 @@ def run_set(
                     share = compiled_share(run)
                     stages.append({**e.timings_ms, "measured": ms, "compiled": share * ms})
             else:
-                warm_up(REGISTRY[label].run, m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
-                r = REGISTRY[label].run(m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed)
+                anchor = partial(
+                    REGISTRY[label].run, m.pts_a, m.pts_b, m.size_a, m.size_b, 1.0, 0.99, seed
+                )
+                warm_up(anchor)
+                r = anchor()
                 F, ms, lines_ms = r.F, r.ms, np.nan
                 hyp = float(r.hypotheses) if r.hypotheses is not None else np.nan
                 ran = used = loop_ms = np.nan

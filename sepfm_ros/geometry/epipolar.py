@@ -205,6 +205,27 @@ def point_costs(
 
 
 @numba.njit(cache=True, nogil=True)
+def _msac_all(
+    f: np.ndarray,
+    x: np.ndarray,
+    y: np.ndarray,
+    u: np.ndarray,
+    v: np.ndarray,
+    threshold: float,
+    e: np.ndarray,
+    inlier: np.ndarray,
+) -> tuple[float, int]:
+    """(MSAC cost summed in index order, inlier count) of one model f (3, 3) over every point
+    (rows x, y, u, v (N,)); e, inlier (N,): the scratch of :func:`point_costs`."""
+    N = x.shape[0]
+    k = point_costs(f, x, y, u, v, 0, N, threshold, e, inlier)
+    c = 0.0
+    for i in range(N):
+        c += e[i]
+    return c, k
+
+
+@numba.njit(cache=True, nogil=True)
 def msac_kernel(
     F: np.ndarray, X1: np.ndarray, X2: np.ndarray, threshold: float
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -220,11 +241,7 @@ def msac_kernel(
     inlier = np.empty(N, dtype=np.bool_)
     x, y, u, v = X1[0], X1[1], X2[0], X2[1]
     for m in range(M):
-        count[m] = point_costs(F[m], x, y, u, v, 0, N, threshold, e, inlier)
-        c = 0.0
-        for i in range(N):
-            c += e[i]
-        cost[m] = c
+        cost[m], count[m] = _msac_all(F[m], x, y, u, v, threshold, e, inlier)
     return cost, count
 
 
@@ -294,13 +311,9 @@ def sprt_msac_kernel(
     for m in range(M):
         f = F[m]
         if not early:  # nothing can stop a model: every point, in index order
-            count[m] = point_costs(f, x, y, u, v, 0, N, threshold, e, inlier)
+            cost[m], count[m] = _msac_all(f, x, y, u, v, threshold, e, inlier)
             read[m] = N
-            c = 0.0
-            for i in range(N):
-                c += e[i]
-            cost[m] = c
-            batch_best = min(batch_best, c)
+            batch_best = min(batch_best, cost[m])
             continue
         c = 0.0
         k = 0

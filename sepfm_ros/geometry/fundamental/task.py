@@ -19,6 +19,7 @@ from sepfm_ros.geometry.fundamental.options import (
     Solver,
 )
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.fundamental.standard_loop import CompiledLoop
 from sepfm_ros.geometry.robust.lmeds import RobustScale
 from sepfm_ros.geometry.robust.loop import Budget, Loop, RansacResult, make_loop
 from sepfm_ros.geometry.robust.trials import ransac_trials
@@ -128,5 +129,5 @@ class FundamentalTask:
         return make_loop(
             [arm], rng, self.confidence, self.budget.limit,
             min_samples=self.min_samples(arm.sample_size), initial=initial,
-            budget=self.budget, sampling=sampling,
+            budget=self.budget, sampling=sampling, cls=CompiledLoop,
         )  # fmt: skip

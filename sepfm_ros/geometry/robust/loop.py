@@ -356,10 +356,12 @@ def make_loop(
     max_extra_lo: int = 10,
     budget: Budget | None = None,
     sampling: SamplingOptions | None = None,
+    cls: type[Loop] = Loop,
 ) -> Loop:
     """The :class:`Loop` that :func:`run_ransac` runs (same arguments), with its first arm
-    joined, before any sample: ``make_loop(...).run()`` is ``run_ransac(...)``."""
-    loop = Loop(
+    joined, before any sample: ``make_loop(...).run()`` is ``run_ransac(...)``. ``cls``: a
+    subclass that runs the same rounds another way (e.g. compiled)."""
+    loop = cls(
         arms, rng, confidence, max_samples, min_samples, race or RaceOptions(), batch,
         extra_lo_ratio, max_extra_lo, budget or Budget(max_samples), sampling or SamplingOptions(),
     )  # fmt: skip

@@ -6,24 +6,43 @@ from __future__ import annotations
 import math
 from functools import lru_cache
 
+import numba
 import numpy as np
 
 from sepfm_ros.geometry.robust.options import SamplingOptions
 
-__all__ = ["Sprt", "sprt_threshold"]
+__all__ = ["Sprt", "sprt_logs", "sprt_threshold"]
 
 
+@numba.njit(cache=True, nogil=True)
 def sprt_threshold(
     epsilon: float, delta: float, model_time: float, models_per_sample: float
 ) -> float:
     """Wald's A for SPRT (Matas & Chum 2008, eq. 11): the fixed point of
-    A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e)."""
-    C = (1 - delta) * np.log((1 - delta) / (1 - epsilon)) + delta * np.log(delta / epsilon)
-    A0 = float(model_time * C / max(models_per_sample, 1e-9) + 1.0)
+    A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e).
+
+    Compiled, and shared by :class:`Sprt` and the compiled loop of
+    :mod:`~sepfm_ros.geometry.fundamental.standard_loop`, so both take the same logarithms (the
+    C library's: numpy's vectorised ``log`` may differ from it in the last bit)."""
+    C = (1 - delta) * math.log((1 - delta) / (1 - epsilon)) + delta * math.log(delta / epsilon)
+    A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0
     A = A0
     for _ in range(20):
         A = A0 + math.log(A)
     return A
+
+
+@numba.njit(cache=True, nogil=True)
+def sprt_logs(A: float, delta: float, epsilon: float) -> tuple[float, float, float]:
+    """(log A, log(delta / eps), log((1 - delta) / (1 - eps))), the SPRT kernel's arguments;
+    (inf, 0, 0) when A is infinite (SPRT off)."""
+    if not math.isfinite(A):
+        return math.inf, 0.0, 0.0
+    return (
+        math.log(A),
+        math.log(delta / epsilon),
+        math.log((1 - delta) / (1 - epsilon)),
+    )
 
 
 @lru_cache(maxsize=16)
@@ -68,11 +87,8 @@ class Sprt:
             self.A = np.inf
         else:
             ms = self.models / self.samples if self.samples else 1.0
-            self.A = sprt_threshold(eps, self.delta, self.opt.sprt_model_time, ms)
+            self.A = sprt_threshold(eps, self.delta, float(self.opt.sprt_model_time), ms)
 
     def logs(self) -> tuple[float, float, float]:
         """(log A, log(delta / eps), log((1 - delta) / (1 - eps))) for the kernel."""
-        if not np.isfinite(self.A):
-            return np.inf, 0.0, 0.0
-        d, e = self.delta, self.epsilon
-        return float(np.log(self.A)), float(np.log(d / e)), float(np.log((1 - d) / (1 - e)))
+        return sprt_logs(float(self.A), float(self.delta), float(self.epsilon))

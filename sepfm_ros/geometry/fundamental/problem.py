@@ -187,6 +187,12 @@ class FundamentalProblem(Problem):
         # (recount: the size of ``inliers``) when the scale shrinks
         self.relative_counts = scoring == "lmeds"
 
+    @property
+    def plain_solve(self) -> bool:
+        """Whether :meth:`solve` is :func:`solve_samples_kernel` on the fixed points alone (what
+        the compiled loop of :mod:`~sepfm_ros.geometry.fundamental.compiled_loop` runs)."""
+        return True
+
     def free_sample_size(self) -> int:
         """Points of a seven- or eight-point sample, fixed ones included."""
         return self.model_points

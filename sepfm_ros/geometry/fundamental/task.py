@@ -10,6 +10,7 @@ from typing import Any
 
 import numpy as np
 
+from sepfm_ros.geometry.fundamental.compiled_loop import CompiledLoop
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
 from sepfm_ros.geometry.fundamental.options import (
     Checks,
@@ -19,7 +20,6 @@ from sepfm_ros.geometry.fundamental.options import (
     Solver,
 )
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
-from sepfm_ros.geometry.fundamental.standard_loop import CompiledLoop
 from sepfm_ros.geometry.robust.lmeds import RobustScale
 from sepfm_ros.geometry.robust.loop import Budget, Loop, RansacResult, make_loop
 from sepfm_ros.geometry.robust.trials import ransac_trials

@@ -298,6 +298,7 @@ def run_ransac(
     max_extra_lo: int = 10,
     budget: Budget | None = None,
     sampling: SamplingOptions | None = None,
+    cls: type[Loop] = Loop,
 ) -> RansacResult:
     """Run RANSAC over one or more arms with adaptive stopping F(k, r) and local optimisation.
 
@@ -329,6 +330,7 @@ def run_ransac(
             when it is spent (default: a fresh budget of ``max_samples``). ``max_samples`` still
             caps F(k, r).
         sampling: PROSAC / SPRT / bail-out (:class:`SamplingOptions`; default all off).
+        cls: the :class:`Loop` class that runs the rounds (a subclass may run them compiled).
 
     With PROSAC the stopping rule stays F(k, r) over all samples drawn, as for uniform
     sampling: it is exact once the schedule has reached the whole pool, and before that it is
@@ -339,7 +341,7 @@ def run_ransac(
     """
     return make_loop(
         arms, rng, confidence, max_samples, min_samples, race, batch, initial, extra_lo_ratio,
-        max_extra_lo, budget, sampling,
+        max_extra_lo, budget, sampling, cls,
     ).run()  # fmt: skip
 
 

@@ -9,6 +9,7 @@ and add the next one (:meth:`Race.step`).
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterator
 
 import numpy as np
@@ -131,7 +132,8 @@ class Race:
         p = self.arms[a].problem
         w = min(1.0, max(self.best.count, 0) / p.n)
         p_good = w**p.sample_size
-        return float(np.log(self.options.drop_alpha) / np.log(max(1e-300, 1.0 - p_good)))
+        # the C library's logarithm, as in the compiled loop (numpy's may differ in the last bit)
+        return math.log(self.options.drop_alpha) / math.log(max(1e-300, 1.0 - p_good))
 
     def unfixed_affordable(self, a: int) -> bool:
         """F(p, r) samples of p points (arm ``a``'s problem's ``free_sample_size``) fit in what

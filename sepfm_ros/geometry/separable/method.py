@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sepfm_ros.geometry.estimate import Estimate
+from sepfm_ros.geometry.fundamental.compiled_loop import CompiledLoop
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
 from sepfm_ros.geometry.fundamental.task import FundamentalTask
 from sepfm_ros.geometry.robust.loop import RansacResult, run_ransac
@@ -144,7 +145,7 @@ def separable(
         race=RaceOptions(pool_rule=opt.race.race_pool, pool_ratio=opt.race.race_pool_ratio),
         budget=problem.budget,
         sampling=problem.sampling.loop(),
-        min_samples=problem.min_samples(problem.model_points - 3),
+        min_samples=problem.min_samples(problem.model_points - 3), cls=CompiledLoop,
     )  # fmt: skip
     est.stage2_hypotheses += result.hypotheses
     if fits and result.leader >= 0 and fits[result.leader] is None:

@@ -31,6 +31,11 @@ class Stage2Problem(FundamentalProblem):
             # px -> image 2 normalised
             self.plane_tol = float(plane_tol) * float(self.data.T2[0, 0])
 
+    @property
+    def plain_solve(self) -> bool:
+        """False when the in-sample plane check is on (it leaves samples out before solving)."""
+        return self.plane_basis.shape[1] != 4
+
     def solve(self, samples: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(B, k) indices -> (F (K, 3, 3) in pixels, index into ``samples`` (K,)), the
         plane-degenerate samples left out when the check is on."""

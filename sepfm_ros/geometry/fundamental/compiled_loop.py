@@ -111,6 +111,90 @@ def _sprt_update(
 
 
 @numba.njit(cache=True, nogil=True)
+def _offer(
+    a: int,
+    models: np.ndarray,
+    cost: np.ndarray,
+    count: np.ndarray,
+    ints: np.ndarray,
+    floats: np.ndarray,
+    best_model: np.ndarray,
+    arm_ints: np.ndarray,
+    arm_floats: np.ndarray,
+    top_models: np.ndarray,
+    n: int,
+    sprt: bool,
+    model_time: float,
+) -> int:
+    """``Loop.offer``: index of the cheapest of arm ``a``'s scored (K, 3, 3) models; updates the
+    arm's best count and top model and the best model (and the SPRT with it). The state
+    arrays are :func:`rounds_kernel`'s."""
+    ints[HYPOTHESES] += models.shape[0]
+    i = int(np.argmin(cost))
+    arm_ints[a, ARM_BEST] = max(arm_ints[a, ARM_BEST], int(count.max()))
+    if cost[i] < arm_floats[a, TOP_COST]:
+        top_models[a] = models[i]
+        arm_floats[a, TOP_COST] = cost[i]
+    if cost[i] < floats[BEST_COST]:
+        best_model[:, :] = models[i]
+        floats[BEST_COST] = cost[i]
+        ints[BEST_COUNT] = count[i]
+        ints[LEADER] = a
+        _sprt_update(ints, floats, n, sprt, model_time)
+    return i
+
+
+@numba.njit(cache=True, nogil=True)
+def _local_optimization(
+    a: int,
+    model: np.ndarray,
+    cost: float,
+    X1: np.ndarray,
+    X2: np.ndarray,
+    T1: np.ndarray,
+    T2: np.ndarray,
+    lo_X1: np.ndarray,
+    lo_X2: np.ndarray,
+    lo_x1: np.ndarray,
+    lo_x2: np.ndarray,
+    threshold: float,
+    lo_factors: np.ndarray,
+    irls: int,
+    lo_lm: bool,
+    ints: np.ndarray,
+    floats: np.ndarray,
+    best_model: np.ndarray,
+    arm_ints: np.ndarray,
+    arm_floats: np.ndarray,
+    top_models: np.ndarray,
+    n: int,
+    sprt: bool,
+    model_time: float,
+) -> None:
+    """``Loop.local_optimization`` of arm ``a``'s ``model`` (3, 3) of cost ``cost``: its refits
+    are scored, and with the LM polish (``lo_lm``) the polish of the best of ``model`` and its
+    refits is offered in their place. Arguments: :func:`rounds_kernel`'s."""
+    lo = _iterative_refit_kernel(
+        model, lo_X1, lo_X2, lo_x1, lo_x2, T1, T2, threshold, lo_factors, irls
+    )
+    start = model
+    lo_cost, lo_count = msac_kernel(lo, X1, X2, threshold)
+    if lo.shape[0] > 0 and lo_cost.min() < cost:
+        start = lo[int(np.argmin(lo_cost))].copy()
+    if lo_lm:
+        refined = _polish_kernel(
+            model, start, lo_x1, lo_x2, lo_X1, lo_X2, T1, T2, threshold, LM_ITERATIONS,
+            LM_MODEL_START,
+        )  # fmt: skip
+        r_cost, r_count = msac_kernel(refined, X1, X2, threshold)
+        _offer(a, refined, r_cost, r_count, ints, floats, best_model, arm_ints, arm_floats,
+               top_models, n, sprt, model_time)  # fmt: skip
+    elif lo.shape[0] > 0:
+        _offer(a, lo, lo_cost, lo_count, ints, floats, best_model, arm_ints, arm_floats,
+               top_models, n, sprt, model_time)  # fmt: skip
+
+
+@numba.njit(cache=True, nogil=True)
 def rounds_kernel(
     mode: int,
     target: int,
@@ -243,37 +327,17 @@ def rounds_kernel(
         return int(arm_share[a] / (1.0 - arm_share[a]) * others) - arm_ints[a, SAMPLES]
 
     def offer(a: int, models: np.ndarray, cost: np.ndarray, count: np.ndarray) -> int:
-        ints[HYPOTHESES] += models.shape[0]
-        i = int(np.argmin(cost))
-        arm_ints[a, ARM_BEST] = max(arm_ints[a, ARM_BEST], int(count.max()))
-        if cost[i] < arm_floats[a, TOP_COST]:
-            top_models[a] = models[i]
-            arm_floats[a, TOP_COST] = cost[i]
-        if cost[i] < floats[BEST_COST]:
-            best_model[:, :] = models[i]
-            floats[BEST_COST] = cost[i]
-            ints[BEST_COUNT] = count[i]
-            ints[LEADER] = a
-            _sprt_update(ints, floats, n, sprt, model_time)
-        return i
+        return _offer(
+            a, models, cost, count, ints, floats, best_model, arm_ints, arm_floats, top_models,
+            n, sprt, model_time,
+        )  # fmt: skip
 
     def local_optimization(a: int, model: np.ndarray, cost: float) -> None:
-        lo = _iterative_refit_kernel(
-            model, lo_X1, lo_X2, lo_x1, lo_x2, T1, T2, threshold, lo_factors, irls
-        )
-        start = model
-        lo_cost, lo_count = msac_kernel(lo, X1, X2, threshold)
-        if lo.shape[0] > 0 and lo_cost.min() < cost:
-            start = lo[int(np.argmin(lo_cost))].copy()
-        if lo_lm:
-            refined = _polish_kernel(
-                model, start, lo_x1, lo_x2, lo_X1, lo_X2, T1, T2, threshold, LM_ITERATIONS,
-                LM_MODEL_START,
-            )  # fmt: skip
-            r_cost, r_count = msac_kernel(refined, X1, X2, threshold)
-            offer(a, refined, r_cost, r_count)
-        elif lo.shape[0] > 0:
-            offer(a, lo, lo_cost, lo_count)
+        _local_optimization(
+            a, model, cost, X1, X2, T1, T2, lo_X1, lo_X2, lo_x1, lo_x2, threshold, lo_factors,
+            irls, lo_lm, ints, floats, best_model, arm_ints, arm_floats, top_models, n, sprt,
+            model_time,
+        )  # fmt: skip
 
     def sample_arm(a: int, b: int, local: bool) -> None:
         k = arm_static[a, K]

@@ -22,7 +22,7 @@ def sprt_threshold(
     A = t_M C / m_S + 1 + ln A with C = (1 - d) ln((1 - d) / (1 - e)) + d ln(d / e).
 
     Compiled, and shared by :class:`Sprt` and the compiled loop of
-    :mod:`~sepfm_ros.geometry.fundamental.standard_loop`, so both take the same logarithms (the
+    :mod:`~sepfm_ros.geometry.fundamental.compiled_loop`, so both take the same logarithms (the
     C library's: numpy's vectorised ``log`` may differ from it in the last bit)."""
     C = (1 - delta) * math.log((1 - delta) / (1 - epsilon)) + delta * math.log(delta / epsilon)
     A0 = model_time * C / max(models_per_sample, 1e-9) + 1.0

@@ -223,3 +223,24 @@ def test_robust_homography_finds_the_plane_and_follows_its_seed():
     H_none = robust_homography(p1, noise, 2.0, 0.5, seed=11, max_trials=500)
     if H_none is not None:
         assert np.count_nonzero(transfer_error(H_none, p1, noise) < 2.0) < 0.2 * 200
+
+
+def test_plane_check_on_prepared_matches_is_the_same_check():
+    """``data`` (the matches prepared by the caller) only saves building them again: the same
+    check, candidates, model and transfer errors, from the same draws, as without it."""
+    from sepfm_ros.geometry.fundamental.correspondences import Correspondences
+
+    tried = 0
+    for seed in range(8):
+        pts1, pts2, *_ = planar_majority_pair(n_off=12, n_out=120, seed=seed)
+        F = estimate_fundamental(pts1, pts2, SIZE, seed=seed, plane_check=False).F
+        data = Correspondences.from_pixels(pts1, pts2)
+        a = plane_and_parallax(F, pts1, pts2, 1.0, np.random.default_rng(seed))
+        b = plane_and_parallax(F, pts1, pts2, 1.0, np.random.default_rng(seed), data=data)
+        tried += a.candidates > 0  # the candidates' path, where data is used
+        assert np.array_equal(a.F, b.F) and np.array_equal(a.transfer, b.transfer)
+        assert (a.replaced, a.plane_inliers, a.off_plane_inliers, a.candidates, a.reason) == (
+            b.replaced, b.plane_inliers, b.off_plane_inliers, b.candidates, b.reason,
+        )  # fmt: skip
+        assert np.array_equal(a.transfer, transfer_error(a.H, pts1, pts2))
+    assert tried >= 2

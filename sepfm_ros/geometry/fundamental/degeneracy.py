@@ -48,6 +48,7 @@ from sepfm_ros.geometry.epipolar import (
     msac_kernel,
     normalize_fundamental,
     paired_hits_kernel,
+    symmetric_epipolar_distance_h,
 )
 from sepfm_ros.geometry.epipolar import symmetric_epipolar_distance as _sed
 from sepfm_ros.geometry.fundamental.correspondences import Correspondences
@@ -74,6 +75,7 @@ class PlaneCheck:
         H: the homography of the plane that was tested, or None.
         accepted: F was kept without trying candidates: its support off the plane is at least
             ``accept_factor`` times the flagging bar above chance.
+        transfer: (N,) px, ``transfer_error(H, ...)`` of the matches the check was given.
     """
 
     F: np.ndarray
@@ -86,6 +88,8 @@ class PlaneCheck:
     reason: str | None = None
     H: np.ndarray | None = None  #: (3, 3) the plane's homography (image 1 -> 2) when found
     accepted: bool = False
+    #: (N,) px, the transfer error of H on the matches the check was given (None without H)
+    transfer: np.ndarray | None = None
 
 
 def robust_homography(
@@ -175,6 +179,7 @@ def plane_and_parallax(
     batch: int = 16,
     plane_points: int = 150,
     accept_factor: float = 2.0,
+    data: Correspondences | None = None,
 ) -> PlaneCheck:
     """Check a final F against a dominant plane; return it or a better plane-and-parallax F.
 
@@ -197,12 +202,15 @@ def plane_and_parallax(
         plane_points: the homography is searched among at most this many of F's inliers,
             drawn at random (its share of all of them is then counted); the search's time
             grows with the points while the share it has to find does not.
+        data: the matches pts1, pts2 prepared (``Correspondences.from_pixels``), when the
+            caller has them (made here otherwise, when candidates are tried).
     Returns:
         A :class:`PlaneCheck`.
     """
     F = normalize_fundamental(F)
     tol = PLANE_TOLERANCE * threshold
-    inl = _sed(F, pts1, pts2) < threshold
+    X1, X2 = (data.X1, data.X2) if data is not None else (None, None)
+    inl = _distances(F, pts1, pts2, X1, X2) < threshold
     out = PlaneCheck(F)
     if np.count_nonzero(inl) < 8:
         return out
@@ -219,7 +227,7 @@ def plane_and_parallax(
     if H is None:
         return out
     out.H = H
-    err_h = transfer_error(H, pts1, pts2)
+    err_h = out.transfer = transfer_error(H, pts1, pts2)
     on = err_h < tol
     far = err_h > parallax_factor * tol  # clear parallax: evidence about F beyond the plane
     out.plane_inliers = int(np.count_nonzero(on & inl))
@@ -247,7 +255,8 @@ def plane_and_parallax(
             pairs = pairs[rng.permutation(len(pairs))]
     else:
         pairs = random_pairs(rng, off, max_candidates)
-    data = Correspondences.from_pixels(pts1, pts2)
+    if data is None:
+        data = Correspondences.from_pixels(pts1, pts2)
     X1o, X2o = np.ascontiguousarray(data.X1[:, off]), np.ascontiguousarray(data.X2[:, off])
     best, best_cost, tried, start = None, np.inf, 0, 0
     while start < len(pairs):
@@ -272,7 +281,7 @@ def plane_and_parallax(
         return out
     # polish the best candidate like the estimator polishes its final model
     choices = [best, *iterative_refit(best, data, threshold)]
-    best_inl = _sed(best, pts1, pts2) < threshold
+    best_inl = _distances(best, pts1, pts2, data.X1, data.X2) < threshold
     if np.count_nonzero(best_inl) >= 8:
         choices.append(fit_least_squares(pts1[best_inl], pts2[best_inl], irls_iterations=5))
     options = np.ascontiguousarray(np.stack([*choices, F]))
@@ -283,7 +292,7 @@ def plane_and_parallax(
     # on it (with a handful of off-plane points its lower cost says nothing), so F stays
     new_inl = None
     if option_costs[k] < option_costs[-1]:
-        new_inl = _sed(options[k], pts1, pts2) < threshold
+        new_inl = _distances(options[k], pts1, pts2, data.X1, data.X2) < threshold
     if new_inl is not None and np.count_nonzero(far & new_inl) >= out.off_plane_inliers:
         out.F = normalize_fundamental(options[k])
         out.replaced = True
@@ -297,6 +306,20 @@ def plane_and_parallax(
             f"{out.off_plane_inliers} off it where {out.off_plane_chance:.1f} agree by chance)"
         )
     return out
+
+
+def _distances(
+    F: np.ndarray,
+    pts1: np.ndarray,
+    pts2: np.ndarray,
+    X1: np.ndarray | None,
+    X2: np.ndarray | None,
+) -> np.ndarray:
+    """(N,) symmetric epipolar distances (px) of the matches to F (3, 3): on their homogeneous
+    columns X1, X2 (3, N) when given (the same kernel, without building them again)."""
+    if X1 is None or X2 is None:
+        return _sed(F, pts1, pts2)
+    return symmetric_epipolar_distance_h(np.asarray(F, dtype=np.float64)[None], X1, X2)[0]
 
 
 def chance_inliers(

@@ -39,7 +39,8 @@ def finish(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> None:
     t4 = time.perf_counter()
     # its own stream (spawned: the estimate's stream is not advanced), so switching it off
     # changes no other step's draws
-    inner_rng = problem.rng.spawn(1)[0]
+    # (the status's stream is spawned here too: spawn(2) gives the children two spawn(1) would)
+    inner_rng, status_rng = problem.rng.spawn(2)
     F, scored = inner_sampling(F, problem.whole(), inner_rng, problem.local.inner_samples)
     est.stage2_hypotheses += scored
     F, refits = _final_model(F, d, threshold, problem.local.refine)
@@ -51,13 +52,16 @@ def finish(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> None:
     if problem.local.final_polish and problem.local.lo == "lm" and plane is None:
         off_plane = None
         if check is not None and check.H is not None:
-            off_plane = transfer_error(check.H, d.pts1, d.pts2) >= PLANE_TOLERANCE * threshold
+            transfer = check.transfer
+            if transfer is None:
+                transfer = transfer_error(check.H, d.pts1, d.pts2)
+            off_plane = transfer >= PLANE_TOLERANCE * threshold
         F = normalize_fundamental(polish_final(F, d, threshold, off_plane))
     est.hypotheses = est.stage1_hypotheses + est.stage2_hypotheses
     est.F = F
     est.inliers = d.distances(F) < threshold
     est.timings_ms["refine"] = 1e3 * (time.perf_counter() - t4)
-    _final_status(problem, est, plane)
+    _final_status(problem, est, plane, rng=status_rng)
 
 
 def _plane_check(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> PlaneCheck | None:
@@ -68,7 +72,7 @@ def _plane_check(problem: FundamentalTask, est: Estimate, F: np.ndarray) -> Plan
     d = problem.data
     check = plane_and_parallax(
         F, d.pts1, d.pts2, problem.threshold, problem.rng,
-        adaptive=problem.checks.plane_check_adaptive,
+        adaptive=problem.checks.plane_check_adaptive, data=d,
     )  # fmt: skip
     est.stage2_hypotheses += check.candidates
     if (
@@ -93,14 +97,16 @@ def _periodic_plane_check(problem: FundamentalTask, est: Estimate, check: PlaneC
         return check
     tol = PLANE_TOLERANCE * threshold  # the plane check's homography tolerance
     inl = d.distances(check.F) < threshold
-    far = transfer_error(H, d.pts1, d.pts2) > 2.0 * tol  # its "clear parallax"
-    shifted = shifted_plane_copy(H, d.pts1, d.pts2, inl & far, tol, problem.rng)
+    transfer = check.transfer if check.transfer is not None else transfer_error(H, d.pts1, d.pts2)
+    far = transfer > 2.0 * tol  # its "clear parallax"
+    shifted = shifted_plane_copy(H, d.pts1, d.pts2, inl & far, tol, problem.rng, transfer=transfer)
     if shifted is None and not check.accepted:
         # a copy F does not explain: F may still ignore the parallax (unless its support off
         # the plane is far above chance, when the plane check kept it without a challenge)
         shifted = shifted_plane_copy(
-            H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100
-        )
+            H, d.pts1, d.pts2, far, tol, problem.rng, min_share=0.15, max_iterations=100,
+            transfer=transfer,
+        )  # fmt: skip
     if shifted is None:
         return check
     keep = ~shifted
@@ -114,23 +120,30 @@ def _periodic_plane_check(problem: FundamentalTask, est: Estimate, check: PlaneC
     again = plane_and_parallax(challenge.F, p1, p2, threshold, problem.rng, adaptive=adaptive)
     est.stage2_hypotheses += challenge.candidates + again.candidates
     again.replaced = again.replaced or challenge.replaced
+    again.transfer = None  # it was measured on the matches off the copy only
     return again
 
 
 def _final_status(
-    problem: FundamentalTask, est: Estimate, plane: str | None, unreliable: str | None = None
+    problem: FundamentalTask,
+    est: Estimate,
+    plane: str | None,
+    unreliable: str | None = None,
+    rng: np.random.Generator | None = None,
 ) -> None:
     """``est.status`` from its final inliers: too few, inliers in a band around one line (the
     more specific reason when a plane holds them too: a band lies on many planes), the plane
     check's reason, ``unreliable`` (a method's own reason), or a consensus that random matches
     give as well (``est.log10_nfa`` >= ``MAX_LOG10_NFA``, :mod:`significance`); else left as it
-    is. The significance test draws its random re-pairings from a stream of its own."""
+    is. The significance test draws its random re-pairings from a stream of its own, ``rng``
+    (spawned from the estimate's when not given)."""
     d, threshold = problem.data, problem.threshold
     k = est.num_inliers
     if k < 8:
         est.set_status(StatusCode.DEGENERATE, f"degenerate: only {k} inliers")
         return
-    rng = problem.rng.spawn(1)[0]
+    if rng is None:
+        rng = problem.rng.spawn(1)[0]
     assert est.F is not None  # set by the callers before the status
     est.log10_nfa = consensus_log10_nfa(est.F, d, est.inliers, threshold, rng)
     chance = None

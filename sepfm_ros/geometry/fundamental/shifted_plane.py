@@ -70,6 +70,7 @@ def shifted_plane_copy(
     rel: float = 0.15,
     max_fit: int = 300,
     max_iterations: int = 500,
+    transfer: np.ndarray | None = None,
 ) -> np.ndarray | None:
     """Matches that follow the plane H shifted by one period of a periodic texture on it.
 
@@ -95,6 +96,7 @@ def shifted_plane_copy(
         max_fit: most candidates H2 is searched on (a random subset; it is scored on all).
         max_iterations: cap on the RHO samples of the H2 search (F(4, 1 - min_share) at 0.995
             below it).
+        transfer: (N,) px, ``transfer_error(H, pts1, pts2)`` when the caller has it.
     Returns:
         (N,) bool, the candidates on the shifted copy H2, or None when there is none.
     """
@@ -112,7 +114,9 @@ def shifted_plane_copy(
     k = int(np.count_nonzero(on2))
     if k < max(min_points, min_share * n_candidates):
         return None
-    plane = pts2[transfer_error(H, pts1, pts2) < tol]
+    if transfer is None:
+        transfer = transfer_error(H, pts1, pts2)
+    plane = pts2[transfer < tol]
     if len(plane) < min_points:
         return None
     try:

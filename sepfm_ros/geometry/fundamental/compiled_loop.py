@@ -103,24 +103,9 @@ class CompiledLoop(Loop):
         while self.compiled():
             event = self._rounds(RUN, 0)
             if event != JOIN:
-                return self._result(event == CONVERGED)
+                return self.result(event == CONVERGED)
             self.race.join_on_schedule(self.join)
         return super().run()
-
-    def _result(self, converged: bool) -> RansacResult:
-        best, sprt = self.best, self.sprt
-        return RansacResult(
-            model=best.model,
-            cost=best.cost,
-            count=max(best.count, 0),
-            leader=best.leader,
-            hypotheses=self.hypotheses,
-            samples=[arm.samples for arm in self.arms],
-            dropped=self.race.dropped,
-            converged=converged,
-            points_read=sprt.points_read if sprt else 0,
-            rejected=sprt.rejected if sprt else 0,
-        )
 
     def _rounds(self, mode: int, target: int) -> int:
         """One call of :func:`rounds_kernel` from this loop's state, written back after it."""

@@ -18,7 +18,8 @@ from sepfm_ros.geometry.fundamental.problem import solve_samples_kernel
 from sepfm_ros.geometry.fundamental.refine import _iterative_refit_kernel
 from sepfm_ros.geometry.robust.samplers import _floyd_samples, _prosac_samples
 from sepfm_ros.geometry.robust.sprt import sprt_logs, sprt_threshold
-from sepfm_ros.geometry.robust.trials import trial_count, trials_needed
+from sepfm_ros.geometry.robust.stopping import samples_needed
+from sepfm_ros.geometry.robust.trials import trials_needed
 
 __all__ = ["ARM_FLOAT_STATE", "ARM_INT_STATE", "FLOAT_STATE", "INT_STATE", "rounds_kernel"]
 
@@ -51,20 +52,6 @@ PROBE, RESUME, RUN = 0, 1, 2
 #: What a call of :func:`rounds_kernel` ended with: not converged (the budget's end, no arm
 #: left, or the probe's samples drawn), converged, or the next arm may join.
 NOT_CONVERGED, CONVERGED, JOIN = 0, 1, 2
-
-
-@numba.njit(cache=True, nogil=True)
-def _needed(
-    k: int, n: int, count: int, A: float, confidence: float, max_samples: int, min_samples: int
-) -> int:
-    """``StoppingRule.needed``: samples of k points needed at the best model's ``count``."""
-    count = max(count, 0)
-    if math.isfinite(A) and n > 0:
-        w = min(1.0, count / n) ** float(k) * (1.0 - 1.0 / A)
-        need = int(min(trial_count(1, w, confidence), float(max_samples)))
-    else:
-        need = trials_needed(k, count, n, confidence, max_samples)
-    return max(need, min_samples)
 
 
 @numba.njit(cache=True, nogil=True)
@@ -256,7 +243,7 @@ def rounds_kernel(
     def needed(a: int) -> int:
         A = floats[SPRT_A] if has_sprt else math.inf
         k = arm_static[a, K]
-        return _needed(k, n, ints[BEST_COUNT], A, confidence, max_samples, min_samples)
+        return samples_needed(k, n, ints[BEST_COUNT], A, confidence, max_samples, min_samples)
 
     def consistent(a: int) -> bool:
         if ints[LEADER] < 0 or not arm_static[a, FIXED_CHECK]:

@@ -270,6 +270,10 @@ class Loop:
             if self.budget.left() <= 0:
                 break
             self.race.step(self.optimize_best, self.join)
+        return self.result(converged)
+
+    def result(self, converged: bool) -> RansacResult:
+        """The run's result from its state (``converged``: the adaptive stop was reached)."""
         best = self.best
         return RansacResult(
             model=best.model,

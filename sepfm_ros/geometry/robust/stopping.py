@@ -4,11 +4,14 @@ scaled by the chance 1 - 1/A that the SPRT accepts a good model (Matas & Chum 20
 
 from __future__ import annotations
 
+import math
+
+import numba
 import numpy as np
 
 from sepfm_ros.geometry.robust.trials import trial_count, trials_needed
 
-__all__ = ["StoppingRule"]
+__all__ = ["StoppingRule", "samples_needed"]
 
 
 class StoppingRule:
@@ -35,12 +38,27 @@ class StoppingRule:
         return need
 
     def _needed(self, k: int, n: int, count: int, sprt_A: float) -> int:
-        count = max(count, 0)
-        if np.isfinite(sprt_A) and n > 0:
-            # SPRT rejects a good model with probability <= 1 / A: an all-inlier sample
-            # yields an accepted model with probability w^k (1 - 1/A) (Matas & Chum, eq. 3)
-            w = min(1.0, count / n) ** k * (1.0 - 1.0 / sprt_A)
-            need = int(min(trial_count(1, w, self.confidence), float(self.max_samples)))
-        else:
-            need = trials_needed(k, count, n, self.confidence, self.max_samples)
-        return max(need, self.min_samples)
+        return int(
+            samples_needed(
+                k, n, count, float(sprt_A), self.confidence, self.max_samples, self.min_samples
+            )
+        )
+
+
+@numba.njit(cache=True, nogil=True)
+def samples_needed(
+    k: int, n: int, count: int, A: float, confidence: float, max_samples: int, min_samples: int
+) -> int:
+    """:meth:`StoppingRule.needed` (compiled, shared with the compiled loop of
+    :mod:`~sepfm_ros.geometry.fundamental.loop_kernel`): samples of ``k`` points needed when
+    the best model has ``count`` of ``n`` points as inliers, with the SPRT at threshold ``A``
+    (inf: no SPRT), capped at ``max_samples``, at least ``min_samples``."""
+    count = max(count, 0)
+    if math.isfinite(A) and n > 0:
+        # SPRT rejects a good model with probability <= 1 / A: an all-inlier sample
+        # yields an accepted model with probability w^k (1 - 1/A) (Matas & Chum, eq. 3)
+        w = min(1.0, count / n) ** float(k) * (1.0 - 1.0 / A)
+        need = int(min(trial_count(1, w, confidence), float(max_samples)))
+    else:
+        need = trials_needed(k, count, n, confidence, max_samples)
+    return max(need, min_samples)

@@ -10,8 +10,15 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
+
 from sepfm_ros.geometry.estimator import METHODS, estimate_fundamental
-from sepfm_ros.geometry.fundamental.shifted_plane import nearest_within
+from sepfm_ros.geometry.fundamental.shifted_plane import (
+    cell_grid,
+    count_near,
+    nearest_within,
+    period_hits,
+)
 from sepfm_ros.geometry.synthetic import make_pair
 
 
@@ -32,6 +39,10 @@ def warm_up() -> float:
         )
         for method in METHODS:
             estimate_fundamental(pair.pts1, pair.pts2, pair.image_size, method=method, seed=0)
-    # the shifted-plane check's kernel runs only on a planar scene, which the pair is not
-    nearest_within(pair.pts2, pair.pts2[:4], 1.0)
+    # the shifted-plane check's kernels run only on a planar scene, which the pair is not
+    plane = np.ascontiguousarray(pair.pts2)
+    nearest_within(plane, plane[:4], 1.0)
+    grid = cell_grid(plane, 1.0)
+    _, radius = period_hits(plane, np.eye(3), np.eye(3), grid, 1.0, 0.15)
+    count_near(plane, grid, plane[: len(radius)], radius, 1.0)
     return time.perf_counter() - t0

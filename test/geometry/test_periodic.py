@@ -230,3 +230,76 @@ def test_nearest_within_equals_a_kd_tree(seed):
         assert np.isinf(got[:2]).all()
         assert np.allclose(got[2:], want, rtol=0, atol=1e-12) or np.array_equal(got[2:], want)
         assert np.count_nonzero(np.isfinite(got)) > 0  # the test reaches the finite branch
+
+
+@pytest.mark.parametrize("shape", ["uniform", "line", "one point", "wide spread", "coarse grid"])
+def test_grid_nearest_equals_a_kd_tree_on_any_spread(shape):
+    """The cell grid's side adapts to the points (a line has no area, a wide spread would need
+    millions of radius-sized cells); a grid built for a larger radius answers a smaller one."""
+    from scipy.spatial import cKDTree
+
+    from sepfm_ros.geometry.fundamental.shifted_plane import cell_grid, grid_nearest
+
+    rng = np.random.default_rng(7)
+    points = {
+        "uniform": rng.uniform(0, 300, (400, 2)),
+        "line": np.c_[rng.uniform(0, 1500, 300), np.full(300, 20.0)],
+        "one point": np.array([[5.0, 5.0]]),
+        "wide spread": rng.uniform(-1e6, 1e6, (200, 2)),
+        "coarse grid": rng.uniform(0, 300, (400, 2)),
+    }[shape]
+    queries = np.concatenate([points + rng.normal(0, 1.5, points.shape), points[:50]])
+    radius = 2.0
+    grid = cell_grid(points, 9.0 if shape == "coarse grid" else radius)
+    lo, hi, side, rows, cols, start, order = grid
+    assert side >= radius and start[-1] == len(points) and sorted(order) == list(range(len(points)))
+    assert rows <= 4099 and cols <= 4099
+    got = grid_nearest(points, grid, queries, radius)
+    want, _ = cKDTree(points).query(queries, distance_upper_bound=radius)
+    want = np.where(want < radius, want, np.inf)
+    assert np.allclose(got, want, rtol=0, atol=1e-9) and np.array_equal(
+        np.isinf(got), np.isinf(want)
+    )
+    assert np.count_nonzero(np.isfinite(got)) >= min(50, len(points))  # the points themselves
+
+
+def _period_hits_reference(plane, H, H2, tol, rel):
+    """The hit count of ``shifted_plane_copy`` written with numpy (inverse, product, norms)."""
+    from sepfm_ros.geometry.fundamental.shifted_plane import nearest_within
+
+    M = H2 @ np.linalg.inv(H)
+    y = np.c_[plane, np.ones(len(plane))] @ M.T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        y = y[:, :2] / y[:, 2:]
+    finite = np.isfinite(y).all(axis=1)
+    shift = np.linalg.norm(y[finite] - plane[finite], axis=1)
+    radius = np.minimum(tol, rel * shift)
+    near = nearest_within(plane, np.ascontiguousarray(y[finite]), tol)
+    return int(np.count_nonzero((shift > tol) & (near < radius))), radius
+
+
+@pytest.mark.parametrize("periodic", [True, False])
+def test_period_hits_equal_the_numpy_formulation(periodic):
+    """On a grid of points seen through a homography H, a shift by one period (H2 = H S) maps
+    most of them onto others; a second plane's H2 maps them anywhere. The kernel's count and
+    radii equal the numpy formulation's."""
+    from sepfm_ros.geometry.fundamental.shifted_plane import cell_grid, period_hits
+
+    rng = np.random.default_rng(3)
+    gx, gy = np.meshgrid(np.arange(12) * 40.0 + 100, np.arange(10) * 40.0 + 80)
+    pts1 = np.c_[gx.ravel(), gy.ravel()] + rng.normal(0, 0.2, (120, 2))
+    H = np.array([[1.05, 0.02, 12.0], [-0.01, 0.98, -7.0], [2e-5, -1e-5, 1.0]])
+    x = np.c_[pts1, np.ones(len(pts1))] @ H.T
+    plane = np.ascontiguousarray(x[:, :2] / x[:, 2:])
+    S = np.array([[1.0, 0.0, 40.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])  # one period along x
+    H2 = H @ S if periodic else np.array([[0.9, 0.1, 60.0], [0.05, 1.1, -30.0], [1e-4, 0, 1.0]])
+    tol, rel = 2.0, 0.15
+    hits, radius = period_hits(plane, H, H2, cell_grid(plane, tol), tol, rel)
+    want_hits, want_radius = _period_hits_reference(plane, H, H2, tol, rel)
+    assert hits == want_hits and np.allclose(radius, want_radius, rtol=1e-12, atol=0)
+    if periodic:
+        assert hits >= 0.8 * len(plane)  # all but the last column land on another point
+    else:
+        assert hits <= 0.1 * len(plane)
+    singular = np.array([[1.0, 2.0, 3.0], [2.0, 4.0, 6.0], [0.0, 0.0, 1.0]])
+    assert period_hits(plane, singular, H2, cell_grid(plane, tol), tol, rel)[0] == -1

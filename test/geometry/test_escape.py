@@ -159,12 +159,12 @@ def test_bad_line_search_cost_raises():
         estimate_fundamental(sp.pts1, sp.pts2, sp.image_size, line_search_cost=-1.0)
 
 
-@pytest.mark.parametrize(("seed", "escaped"), [(4, True), (21, False), (22, True)])
+@pytest.mark.parametrize(("seed", "escaped"), [(4, True), (0, False), (22, True)])
 def test_a_dominant_plane_gets_the_line_search_after_all(seed, escaped):
     """A plane holding most matches can show the probe a high inlier ratio; the escape then
     hands the pair to standard RANSAC, which stops on the plane (degenerate), and sep4 runs its
     line search as without the escape (same answer, the first try's work counted: seeds 4 and
-    22). On seed 21 the probe's best minimal model holds too few matches and the line search
+    22). On seed 0 the probe's best minimal model holds too few matches and the line search
     runs at once. On seed 4 the line search finds the F of the 10 off-plane matches."""
     pts1, pts2, off1, off2, _ = planar_majority_pair(n_off=10, n_out=30, seed=seed)
     r7 = estimate_fundamental(pts1, pts2, SIZE, seed=seed, method="ransac7")

@@ -17,13 +17,13 @@ from sepfm_ros.geometry.robust.options import PoolRule
 #: The line search's cost in F hypotheses (one seven-point model solved and scored on all
 #: matches, with the loop's share of local optimisation): its median ms per pair over
 #: ransac7's median ms per hypothesis of its loop (``timings_ms["stage2"]`` / hypotheses), both
-#: from ``benchmarks/bench_ablation.py`` ("line search in hypothesis-equivalents"): 1.13 ms over
-#: 47 us = 24 on the shared pairs (SIFT 0.95), whose clean pairs sit near the break-even ratio
-#: where the figure matters; 158 on the line-rich pairs, whose hard pairs' hypotheses are
-#: mostly cut short by the SPRT (10 us each) and whose inlier ratios are far below the
-#: break-even (at w = 0.5 the line search pays up to 739). Defined here, where the escape
-#: (``separable.escape``) reads it, so that the node's parameter table imports no numba.
-LINE_SEARCH_HYPOTHESES = 24.0
+#: from ``benchmarks/bench_ablation.py`` ("line search in hypothesis-equivalents"): 0.62 ms over
+#: 14.5 us = 43 on the shared pairs (SIFT 0.95), whose clean pairs sit near the break-even ratio
+#: where the figure matters; about 400 on the line-rich pairs, whose hard pairs' hypotheses are
+#: mostly cut short by the SPRT and whose inlier ratios are far below the break-even (at w = 0.5
+#: the line search pays up to 739). Defined here, where the escape (``separable.escape``) reads
+#: it, so that the node's parameter table imports no numba.
+LINE_SEARCH_HYPOTHESES = 43.0
 
 
 @dataclass(frozen=True)

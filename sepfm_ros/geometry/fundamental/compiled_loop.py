@@ -14,9 +14,10 @@ run the generic Python rounds; a loop may switch to them between calls, as the s
 the loop's own objects.
 
 The kernel is the Python loop's own sequence of steps, kept to the bit: the same draws from the
-same generator (numba reads numpy's bit generator in place, so the generator has advanced as
-far afterwards), the same kernels, the same decisions, and the same logarithms (the C
-library's, in both). The state crosses the boundary as small arrays and models, for each call.
+same generator (the kernel calls the bit generator's own ``next_double`` on its state,
+``robust.generator_draws``, so the generator has advanced as far afterwards), the same kernels,
+the same decisions, and the same logarithms (the C library's, in both). The state crosses the
+boundary as small arrays and models, for each call.
 """
 
 from __future__ import annotations
@@ -52,6 +53,7 @@ from sepfm_ros.geometry.fundamental.loop_kernel import (
     rounds_kernel,
 )
 from sepfm_ros.geometry.fundamental.problem import FundamentalProblem
+from sepfm_ros.geometry.robust.generator_draws import generator_address
 from sepfm_ros.geometry.robust.loop import Loop, RansacResult
 
 __all__ = ["CompiledLoop"]
@@ -68,6 +70,8 @@ class CompiledLoop(Loop):
     _model_arrays: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     #: the model objects the last call left in the best model and the arms (:meth:`_models`)
     _synced: tuple[Any, list[Any], list[Any]] = (None, [], [])
+    #: (the generator, its addresses for the kernel) (:meth:`_rng_address`)
+    _rng_cache: tuple[np.random.Generator, np.ndarray] | None = None
 
     def compiled(self) -> bool:
         """Whether the next rounds can be compiled: MSAC arms that solve with their fixed
@@ -146,7 +150,7 @@ class CompiledLoop(Loop):
         # (mypy cannot count the arguments of the unpacked tuples)
         event = int(
             rounds_kernel(  # type: ignore[call-arg]
-                mode, int(target), self.rng, *static, ints, floats, *models, arm_ints,
+                mode, int(target), self._rng_address(), *static, ints, floats, *models, arm_ints,
                 arm_floats, active, dropped,
             )
         )  # fmt: skip
@@ -156,6 +160,14 @@ class CompiledLoop(Loop):
         race.active[:] = active[: ints[N_ACTIVE]].tolist()
         race.dropped[:] = dropped[: ints[N_DROPPED]].tolist()
         return event
+
+    def _rng_address(self) -> np.ndarray:
+        """The run's generator as the kernel draws from it (``generator_draws``), made once
+        per generator (the loop keeps the generator alive)."""
+        cached = self._rng_cache
+        if cached is None or cached[0] is not self.rng:
+            cached = self._rng_cache = (self.rng, generator_address(self.rng))
+        return cached[1]
 
     def _write_back(
         self,

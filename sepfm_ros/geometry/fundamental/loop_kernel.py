@@ -16,6 +16,7 @@ from sepfm_ros.geometry.epipolar import distances_kernel, msac_kernel, sprt_msac
 from sepfm_ros.geometry.fundamental.nonlinear import LM_ITERATIONS, LM_MODEL_START, _polish_kernel
 from sepfm_ros.geometry.fundamental.problem import solve_samples_kernel
 from sepfm_ros.geometry.fundamental.refine import _iterative_refit_kernel
+from sepfm_ros.geometry.robust.generator_draws import uniform_draws
 from sepfm_ros.geometry.robust.samplers import _floyd_samples, _prosac_samples
 from sepfm_ros.geometry.robust.sprt import sprt_logs, sprt_threshold
 from sepfm_ros.geometry.robust.stopping import samples_needed
@@ -162,7 +163,7 @@ def _local_optimization(
 def rounds_kernel(
     mode: int,
     target: int,
-    rng: np.random.Generator,
+    rng: np.ndarray,
     X1: np.ndarray,
     X2: np.ndarray,
     x1: np.ndarray,
@@ -205,7 +206,7 @@ def rounds_kernel(
 
     mode: :data:`PROBE` (rounds without local optimisation of minimal-sample models until
     ``target`` samples in all), :data:`RESUME` or :data:`RUN`. rng: the run's generator
-    (advanced in place).
+    (``generator_draws.generator_address``; it advances in place).
     X1, X2: (3, N) homogeneous px; x1, x2: (N, 2) normalised by T1, T2 (3, 3): the matches
     scored. lo_*: the matches local optimisation fits on (same T1, T2). order, ordered: the
     SPRT's reading order (N,) and the points in it (4, N).
@@ -306,7 +307,7 @@ def rounds_kernel(
     def sample_arm(a: int, b: int, local: bool) -> None:
         k = arm_static[a, K]
         pool = pools[pool_start[a] : pool_start[a + 1]]
-        u = rng.random((b, k))
+        u = uniform_draws(rng, b, k)
         if arm_static[a, PROSAC]:
             schedule = schedules[schedule_start[a] : schedule_start[a + 1]]
             idx = _prosac_samples(u, arm_ints[a, PROSAC_T], pool.shape[0], schedule)
